@@ -1,0 +1,5 @@
+import sys
+
+from arsim.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""Conventions and plumbing every stage shares: directions and layouts, cameras, HDR files, GL context."""

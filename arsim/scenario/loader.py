@@ -1,0 +1,53 @@
+"""Loading scenario files (or the embedded default) into a checked Scenario."""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import tomli_w
+
+from arsim.core.assets import assets_dir
+from arsim.scenario.schema import PathResolver, ScenarioError, parse_section, section_to_dict
+from arsim.scenario.sections import Scenario
+
+__all__ = ["DEFAULT_SCENARIO", "load_scenario", "parse_scenario", "scenario_to_toml"]
+
+# Shown in messages and manifests where the embedded default scenario is meant.
+DEFAULT_SCENARIO = "<default scenario>"
+
+
+def _default_text() -> str:
+    return resources.files("arsim.scenario").joinpath("default.toml").read_text(encoding="utf-8")
+
+
+def parse_scenario(text: str, source: str = DEFAULT_SCENARIO, scenario_dir: Path | None = None) -> Scenario:
+    """A Scenario from TOML text; paths resolve against scenario_dir, then against the assets."""
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{source}: is not valid TOML ({exc}); fix the syntax at that place") from None
+    return parse_section(Scenario, table, source, PathResolver(scenario_dir, assets_dir()))
+
+
+def load_scenario(path: str | os.PathLike | None = None) -> Scenario:
+    """The scenario in the TOML file at path, or the embedded default when path is None."""
+    if path is None:
+        return parse_scenario(_default_text())
+    path = Path(path)
+    if not path.exists():
+        raise ScenarioError(f"{path}: no such scenario file; check the path (or leave it out to use the default scenario)")
+    if not path.is_file():
+        raise ScenarioError(f"{path}: is not a file; give a scenario .toml file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ScenarioError(f"{path}: is not a text file; give a scenario .toml file") from None
+    return parse_scenario(text, str(path), path.resolve().parent)
+
+
+def scenario_to_toml(scenario: Scenario) -> str:
+    """The scenario as resolved (defaults filled in, paths absolute), as TOML text."""
+    return tomli_w.dumps(section_to_dict(scenario))

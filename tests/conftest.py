@@ -1,0 +1,23 @@
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
+ENVMAPS = sorted((ASSETS / "envmaps").glob("*.exr"))
+
+
+def write_raw_exr(path: Path, channels: dict[str, np.ndarray]) -> Path:
+    """An EXR written straight through OpenEXR (not arsim), to test reading what other tools write."""
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    OpenEXR.File(header, channels).write(str(path))
+    return path
+
+
+@pytest.fixture
+def gradient() -> np.ndarray:
+    """A small 2:1 float32 RGB image with distinct values per texel and channel."""
+    h, w = 8, 16
+    r = np.arange(h * w, dtype=np.float32).reshape(h, w) / 10
+    return np.stack([r, r + 0.5, 2 * r + 0.25], axis=-1)
