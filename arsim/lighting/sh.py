@@ -20,6 +20,7 @@ P_l^m infinite, whose product is NaN, which Alg. 4.7 (lines 25-33) zeroes.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -159,23 +160,25 @@ class _Orbits:
 
 
 def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False) -> np.ndarray:
-    """SH coefficients (order^2, 3) of an angle map, summed over its disk texels with their solid angles."""
+    """SH coefficients (order^2, C) of an angle map (N, N, C), summed over its disk texels with their
+    solid angles."""
     n = env.shape[0]
     orbits = _Orbits.of(n)
     inside = anglemap_disk_mask(n)
     lw = env[inside].astype(np.float64) * anglemap_solid_angles(n)[inside][:, None]
     # Per orbit, per sigma and per r = m mod 4: sum of L W i^(r k).
     n_orbits = orbits.alpha.size
-    partial = np.zeros((2, 4, n_orbits, 3), dtype=np.complex128)
+    channels = lw.shape[1]
+    partial = np.zeros((2, 4, n_orbits, channels), dtype=np.complex128)
     for r in range(4):
-        phase = (1j) ** ((r * orbits.texel_k) % 4)
+        phase = (1j) ** ((r * orbits.texel_k) % 4)  # i^(m k) depends on m only through m mod 4
         for side, sign in enumerate((1, -1)):
             sel = orbits.texel_sigma == sign
-            for ch in range(3):
-                partial[side, r, :, ch] = np.bincount(orbits.texel_orbit[sel], weights=(lw[sel, ch] * phase[sel]).real,
-                                                      minlength=n_orbits) + 1j * np.bincount(
-                    orbits.texel_orbit[sel], weights=(lw[sel, ch] * phase[sel]).imag, minlength=n_orbits)
-    coeffs = np.zeros((order * order, 3))
+            for ch in range(channels):
+                weights = lw[sel, ch] * phase[sel]
+                partial[side, r, :, ch] = (np.bincount(orbits.texel_orbit[sel], weights.real, n_orbits)
+                                           + 1j * np.bincount(orbits.texel_orbit[sel], weights.imag, n_orbits))
+    coeffs = np.zeros((order * order, channels))
     step = np.exp(1j * orbits.alpha)
     z = np.ones_like(step)
     for m, p in _Legendre(orbits.theta, order, faithful):
@@ -200,25 +203,26 @@ def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False) -> np.n
 
 def sh_synthesis_grid(coeffs: np.ndarray, kappas: np.ndarray, n_theta: int, n_phi: int,
                       faithful: bool = False) -> np.ndarray:
-    """Values (E, 3, n_theta, n_phi) of sum_lm kappa_l c_lm Y_lm on the grid theta_r = r pi/(n_theta-1),
+    """Values (E, C, n_theta, n_phi) of sum_lm kappa_l c_lm Y_lm on the grid theta_r = r pi/(n_theta-1),
     phi_c = 2 pi c / n_phi, for E sets of zonal factors kappas (E, order)."""
     n_maps, order = kappas.shape
+    channels = coeffs.shape[1]
     theta = np.linspace(0.0, np.pi, n_theta)
-    spectrum = np.zeros((n_maps * 3, n_theta, n_phi // 2 + 1), dtype=np.complex128)
+    spectrum = np.zeros((n_maps * channels, n_theta, n_phi // 2 + 1), dtype=np.complex128)
     for m, p in _Legendre(theta, order, faithful):
         ls = np.arange(m, order)
-        a = coeffs[ls * (ls + 1) + m]  # (order-m, 3)
+        a = coeffs[ls * (ls + 1) + m]  # (order-m, C)
         if m > 0:
             # x(phi) = sum_m sqrt2 (a_m cos m phi + b_m sin m phi) = Re sum_m sqrt2 (a_m - i b_m) e^{i m phi}
             a = (n_phi / 2) * np.sqrt(2.0) * (a - 1j * coeffs[ls * (ls + 1) - m])
         else:
             a = n_phi * a
-        weighted = (kappas[:, m:, None] * a[None]).transpose(0, 2, 1).reshape(n_maps * 3, order - m)
+        weighted = (kappas[:, m:, None] * a[None]).transpose(0, 2, 1).reshape(n_maps * channels, order - m)
         with np.errstate(invalid="ignore", over="ignore"):
             if faithful:
                 p = np.nan_to_num(p, nan=0.0, posinf=0.0, neginf=0.0)
-            spectrum[:, :, m] = weighted @ p  # (E*3, n_theta), BLAS
-    return scipy.fft.irfft(spectrum, n=n_phi, axis=-1, workers=-1).reshape(n_maps, 3, n_theta, n_phi)
+            spectrum[:, :, m] = weighted @ p  # (E*C, n_theta), BLAS
+    return scipy.fft.irfft(spectrum, n=n_phi, axis=-1, workers=-1).reshape(n_maps, channels, n_theta, n_phi)
 
 
 @dataclass(frozen=True)
@@ -243,15 +247,21 @@ class _GridSampler:
         return cls(index, weight)
 
     def __call__(self, grid: np.ndarray) -> np.ndarray:
-        """(K, 3) samples of a (3, n_theta, n_phi) grid."""
+        """(K, C) samples of a (C, n_theta, n_phi) grid."""
         flat = grid.reshape(grid.shape[0], -1)
         return sum(w * flat[:, i] for i, w in zip(self.index, self.weight)).T
 
 
+@functools.lru_cache(maxsize=8)
+def _disk_sampler(n: int, n_theta: int, n_phi: int) -> _GridSampler:
+    """The sampler of every disk texel of an N x N angle map (kept: bakes map by map reuse it)."""
+    return _GridSampler.of(anglemap_directions(n)[anglemap_disk_mask(n)], n_theta, n_phi)
+
+
 def sample_sh_grid(grid: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Bilinear samples (..., 3) of one synthesis grid (3, n_theta, n_phi) at unit directions (..., 3)."""
+    """Bilinear samples (..., C) of one synthesis grid (C, n_theta, n_phi) at unit directions (..., 3)."""
     d = np.asarray(directions, dtype=np.float64)
-    return _GridSampler.of(d.reshape(-1, 3), *grid.shape[1:])(grid).reshape(d.shape[:-1] + (3,))
+    return _GridSampler.of(d.reshape(-1, 3), *grid.shape[1:])(grid).reshape(d.shape[:-1] + (grid.shape[0],))
 
 
 def synthesis_grid_size(order: int) -> tuple[int, int]:
@@ -261,26 +271,36 @@ def synthesis_grid_size(order: int) -> tuple[int, int]:
     return n_theta, 2 * (n_theta - 1)
 
 
+def probe_with_weights(env: np.ndarray) -> np.ndarray:
+    """The angle map with a fourth channel of ones: its SH coefficients carry the texel weights' own
+    (normalising) sum beside the radiance, as Alg. 4.1 divides by sum f W."""
+    return np.concatenate([np.asarray(env, dtype=np.float64)[..., :3], np.ones(env.shape[:2] + (1,))], axis=-1)
+
+
 def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[int], faithful: bool = False,
-            coeffs: np.ndarray | None = None) -> np.ndarray:
+            coeffs: np.ndarray | None = None, normalise: bool = False) -> np.ndarray:
     """Maps (E, N, N, 3) float32 from SH (bands 0..order-1); 0 outside the disk.
 
-    order may be one per exponent (the `fast` method gives each the order its lobe needs); the
-    coefficients are computed once, at the largest order."""
+    order may be one per exponent (`fast` gives each the order its lobe needs); the coefficients are
+    computed once, at the largest order. normalise divides by the SH image of the weights (coeffs of
+    probe_with_weights), like Alg. 4.1's sum f W; Alg. 4.7 does not, and is reproduced without."""
     n = env.shape[0]
     orders = [int(order)] * len(exponents) if np.isscalar(order) else [int(o) for o in order]
-    top = max(orders)
     if coeffs is None:
-        coeffs = sh_coefficients(env, top, faithful)
+        source = probe_with_weights(env) if normalise else env
+        coeffs = sh_coefficients(source, max(orders), faithful)
     inside = anglemap_disk_mask(n)
-    directions = anglemap_directions(n)[inside]
     maps = np.zeros((len(exponents), n, n, 3), dtype=np.float32)
     for o in sorted(set(orders)):
         which = [k for k, ok in enumerate(orders) if ok == o]
         kappas = np.stack([phong_zonal_coefficients(exponents[k], o) for k in which])
         size = synthesis_grid_size(o)
         grid = sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful)
-        sample = _GridSampler.of(directions, *size)
+        sample = _disk_sampler(n, *size)
         for g, k in zip(grid, which):
-            maps[k][inside] = sample(g)
+            values = sample(g)
+            if normalise:
+                den = values[:, 3:]
+                values = np.divide(values[:, :3], den, out=np.zeros_like(values[:, :3]), where=den > 0)
+            maps[k][inside] = values
     return maps

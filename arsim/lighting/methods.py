@@ -1,0 +1,126 @@
+"""The map methods by name, their parameters, and a timed bake of several exponents at once.
+
+Every method takes an N x N angle map and Phong exponents and returns one float32 angle map per
+exponent (E, N, N, 3): s = 1 is the irradiance map (E / pi), s > 1 reflection maps (DESIGN.md 3).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from arsim.core.errors import ArsimError
+from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, accurate_maps, check_inputs
+from arsim.lighting.fast import fast_coefficients, fast_maps
+from arsim.lighting.mc import mc_maps
+from arsim.lighting.mipmap import mipmap_maps
+from arsim.lighting.sh import MAX_ORDER, sh_coefficients, sh_maps
+
+DEFAULT_EXPONENTS = (1, 2, 10, 20, 40, 80, 160, 240, 320, 640, 1280)
+
+
+@dataclass(frozen=True)
+class MapParameters:
+    """What the methods can be tuned with (each uses only its own)."""
+
+    sh_order: int = 35  # sh: bands 0..sh_order-1, the thesis's order in its figures
+    sh_faithful: bool = False  # sh: evaluate Y_lm as Alg. 2.5/2.6 (factorials in double)
+    samples: int = 64  # mc: importance samples per texel
+    seed: int = 0  # mc
+    bounds_threshold: float = DEFAULT_BOUNDS_THRESHOLD  # bounds: smallest lobe value kept
+
+    def check(self) -> None:
+        if not 1 <= self.sh_order <= MAX_ORDER:
+            raise ArsimError(f"--sh-order {self.sh_order} is out of range: give 1 to {MAX_ORDER}")
+        if self.samples < 1:
+            raise ArsimError(f"--samples {self.samples} is out of range: give at least 1")
+        if not 0 < self.bounds_threshold < 1:
+            raise ArsimError(f"bounds threshold {self.bounds_threshold} is out of range: give a value in (0, 1)")
+
+
+@dataclass(frozen=True)
+class Method:
+    """A map method: `prepare` does the work all maps share (SH coefficients, say) once, `map` makes the
+    map of one exponent from it. Splitting them lets a bake report the time of every map."""
+
+    name: str
+    summary: str
+    prepare: Callable[[np.ndarray, Sequence[float], MapParameters], object]
+    map: Callable[[np.ndarray, object, float, MapParameters], np.ndarray]
+
+
+def _sh_prepare(env, exponents, p):
+    return sh_coefficients(env, p.sh_order, p.sh_faithful)
+
+
+def _fast_prepare(env, exponents, p):
+    return fast_coefficients(env, exponents)
+
+
+METHODS = {
+    m.name: m
+    for m in (
+        Method("accurate", "brute-force sum over every texel (Alg. 4.1/4.2), float64: the reference",
+               lambda env, ex, p: None, lambda env, _, s, p: accurate_maps(env, [s])[0]),
+        Method("bounds", "the accurate sum over the cone where the lobe exceeds a threshold (section 6.2.2)",
+               lambda env, ex, p: None,
+               lambda env, _, s, p: accurate_maps(env, [s], bounds_threshold=p.bounds_threshold)[0]),
+        Method("fast", "exact texel sums through SH of the order each lobe needs (about a second at 512²)",
+               _fast_prepare, lambda env, c, s, p: fast_maps(env, [s], coeffs=c)[0]),
+        Method("mipmap", "trilinear lookup in a 2x2-box MIP chain at the level of eq. 4.2/4.3 (Alg. 4.3)",
+               lambda env, ex, p: None, lambda env, _, s, p: mipmap_maps(env, [s])[0]),
+        Method("sh", "spherical harmonics of --sh-order bands convolved with the Phong lobe (Alg. 4.4-4.7)",
+               _sh_prepare, lambda env, c, s, p: sh_maps(env, [s], p.sh_order, p.sh_faithful, coeffs=c)[0]),
+        Method("mc", "Monte Carlo importance sampling with MIP-filtered samples (Colbert and Krivanek)",
+               lambda env, ex, p: None, lambda env, _, s, p: mc_maps(env, [s], p.samples, p.seed)[0]),
+    )
+}
+
+
+def method(name: str) -> Method:
+    if name not in METHODS:
+        raise ArsimError(f"map method '{name}' is unknown; use one of {', '.join(METHODS)}")
+    return METHODS[name]
+
+
+def parameters_used(name: str, params: MapParameters) -> dict:
+    """The parameters that matter for a method (for bake.json and reports)."""
+    used = {"sh": ("sh_order", "sh_faithful"), "mc": ("samples", "seed"), "bounds": ("bounds_threshold",)}
+    return {k: v for k, v in asdict(params).items() if k in used.get(name, ())}
+
+
+@dataclass(frozen=True)
+class BakeResult:
+    maps: np.ndarray  # (E, N, N, 3) float32
+    seconds_shared: float  # work all maps share (SH coefficients)
+    seconds_per_map: tuple[float, ...]  # one per exponent
+
+    @property
+    def seconds_total(self) -> float:
+        return self.seconds_shared + sum(self.seconds_per_map)
+
+
+def bake(env: np.ndarray, exponents: Sequence[float], name: str, params: MapParameters | None = None,
+         progress: Callable[[int], None] | None = None) -> BakeResult:
+    """All maps of one method, timed; progress(k) is called after map k is done."""
+    params = params or MapParameters()
+    params.check()
+    check_inputs(env, exponents)
+    m = method(name)
+    start = time.perf_counter()
+    shared = m.prepare(env, list(exponents), params)
+    shared_s = time.perf_counter() - start
+    maps = np.zeros((len(exponents),) + env.shape[:2] + (3,), dtype=np.float32)
+    per_map = []
+    for k, s in enumerate(exponents):
+        start = time.perf_counter()
+        maps[k] = m.map(env, shared, float(s), params)
+        per_map.append(time.perf_counter() - start)
+        if progress is not None:
+            progress(k + 1)
+    if not np.isfinite(maps).all():  # never hand out a NaN or Inf, whatever the method did
+        raise ArsimError(f"method {name} produced non-finite values; please report this with the input")
+    return BakeResult(maps, shared_s, tuple(per_map))
