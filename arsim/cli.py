@@ -7,11 +7,17 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from arsim import __version__
 from arsim.core.errors import ArsimError
-from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
+from arsim.core.files import write_text_atomic
+from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_exr, write_image
 from arsim.core.image_stats import image_stats
+from arsim.core.progress import progress_bar
 from arsim.core.resample import LAYOUTS, detect_layout, to_layout
+from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_comparison
+from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method, parameters_used
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 
 MAX_SIZE = 16384
@@ -90,6 +96,116 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------------------------
+# arsim bake, arsim compare-methods
+
+
+def _map_size(text: str) -> int:
+    value = _size(text)
+    if value < 8 or value & (value - 1):
+        raise argparse.ArgumentTypeError(f"size {value} is not allowed: maps need a power of two from 8 up (64, 128, 256, 512, ...)")
+    return value
+
+
+def _exponents(text: str) -> list[float]:
+    values = []
+    for part in text.split(","):
+        try:
+            value = float(part)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()!r} is not a number; give e.g. --spec 1,10,80") from None
+        if not (np.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()} is not allowed: exponents must be positive")
+        values.append(value)
+    return values
+
+
+def _positive_int(name: str):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} {text!r} is not an integer") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{name} {value} is out of range: give at least 1")
+        return value
+
+    return parse
+
+
+def map_filename(exponent: float) -> str:
+    """irradiance.exr for s = 1, reflection_s<S>.exr otherwise (DESIGN.md section 4)."""
+    if exponent == 1:
+        return "irradiance.exr"
+    return f"reflection_s{int(exponent) if float(exponent).is_integer() else f'{exponent:g}'}.exr"
+
+
+def _probe(path: Path, size: int | None) -> np.ndarray:
+    """The environment as an angle map of the given size; an angle map of that size is used as it is."""
+    image, _ = replace_nonfinite(read_hdr(path), "refuse", str(path))
+    layout = detect_layout(image, str(path))
+    if layout == "anglemap" and size in (None, image.shape[0]):
+        if image.shape[0] < 8 or image.shape[0] & (image.shape[0] - 1):
+            raise ArsimError(f"{path}: angle map size {image.shape[0]} is not a power of two from 8 up; pass --size 256 (or 512, ...)")
+        return image
+    return to_layout(image, "anglemap", size or 512)
+
+
+def _parameters(args: argparse.Namespace) -> MapParameters:
+    return MapParameters(sh_order=args.sh_order, sh_faithful=args.sh_faithful, samples=args.samples, seed=args.seed)
+
+
+def _output_dir(path: Path) -> Path:
+    if path.exists() and not path.is_dir():
+        raise ArsimError(f"{path}: exists and is not a folder; give a folder for -o")
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def cmd_bake(args: argparse.Namespace) -> int:
+    env = _probe(args.env, args.size)
+    out = _output_dir(args.output)
+    params = _parameters(args)
+    with progress_bar(f"baking {len(args.spec)} maps ({args.method})", len(args.spec)) as update:
+        result = bake(env, args.spec, args.method, params, progress=lambda k: update(completed=k))
+    files = {}
+    for s, m, seconds in zip(args.spec, result.maps, result.seconds_per_map):
+        name = map_filename(s)
+        write_exr(out / name, m)
+        files[name] = {"exponent": s, "seconds": round(seconds, 4)}
+    record = {
+        "method": args.method,
+        "parameters": parameters_used(args.method, params),
+        "environment": str(args.env),
+        "size": int(env.shape[0]),
+        "maps": files,
+        "seconds_shared": round(result.seconds_shared, 4),
+        "seconds_total": round(result.seconds_total, 4),
+    }
+    write_text_atomic(out / "bake.json", json.dumps(record, indent=2) + "\n")
+    print(f"wrote {len(files)} maps ({args.method}, {env.shape[0]}² angle maps) to {out} in {result.seconds_total:.2f} s")
+    return 0
+
+
+def cmd_compare_methods(args: argparse.Namespace) -> int:
+    for name in args.methods:
+        method(name)  # an unknown name fails here, before any work
+    env = _probe(args.env, args.size)
+    out = _output_dir(args.output)
+    with progress_bar("comparing methods", len(args.methods) + 3) as update:
+        steps = iter(range(1, 100))
+        comparison = compare(env, args.spec, args.methods, _parameters(args), args.reference_texels,
+                             args.sh_orders, progress=lambda stage: update(completed=next(steps) - 1, description=stage))
+    paths = write_comparison(comparison, out)
+    for name, errors in comparison.errors.items():
+        worst_mean = max(e["mean"] for e in errors)
+        worst_max = max(e["max"] for e in errors)
+        print(f"{name:<9} mean error up to {worst_mean:8.3f} %  max error up to {worst_max:9.2f} %  "
+              f"{comparison.seconds[name]:7.2f} s")
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
 # arsim validate
 
 
@@ -129,6 +245,40 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--nan", choices=NONFINITE_POLICIES, default="refuse",
                    help="what to do with NaN/Inf texels: refuse the image (default) or replace them with 0")
     p.set_defaults(run=cmd_convert)
+
+    def map_options(p: argparse.ArgumentParser) -> None:
+        p.add_argument("env", type=Path, metavar="ENV", help="HDR environment, equirect 2:1 or angle map 1:1 (.exr or .hdr)")
+        p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+        p.add_argument("--size", type=_map_size, metavar="N",
+                       help="N of the N x N angle maps, a power of two from 8 (default: an angle map's own size, else 512)")
+        p.add_argument("--spec", type=_exponents, default=list(DEFAULT_EXPONENTS), metavar="S,S,...",
+                       help="Phong exponents; 1 is the irradiance map (default: " + ",".join(map(str, DEFAULT_EXPONENTS)) + ")")
+        p.add_argument("--sh-order", type=_positive_int("--sh-order"), default=MapParameters.sh_order, metavar="L",
+                       help=f"sh: bands 0..L-1, L² coefficients (default {MapParameters.sh_order})")
+        p.add_argument("--sh-faithful", action="store_true",
+                       help="sh: evaluate Y_lm with factorials in double precision as the thesis's Alg. 2.5/2.6")
+        p.add_argument("--samples", type=_positive_int("--samples"), default=MapParameters.samples, metavar="K",
+                       help=f"mc: importance samples per texel (default {MapParameters.samples})")
+        p.add_argument("--seed", type=int, default=0, help="mc: random seed (default 0)")
+
+    p = _command(sub, "bake", "compute irradiance and reflection maps of an HDR environment with one method",
+                 "arsim bake assets/envmaps/courtyard.exr -o maps --method fast --size 512 --spec 1,10,80")
+    map_options(p)
+    p.add_argument("--method", choices=list(METHODS), default="fast",
+                   help="; ".join(f"{m.name}: {m.summary}" for m in METHODS.values()) + " (default fast)")
+    p.set_defaults(run=cmd_bake)
+
+    p = _command(sub, "compare-methods", "measure every map method against accurate: tables, a figure grid, SH error by order",
+                 "arsim compare-methods assets/envmaps/courtyard.exr -o compare --size 128")
+    map_options(p)
+    p.add_argument("--methods", type=lambda t: [m.strip() for m in t.split(",")], default=[m for m in METHODS if m != "accurate"],
+                   metavar="M,M,...", help="methods to compare (default: all but accurate, which is the reference)")
+    p.add_argument("--reference-texels", type=_positive_int("--reference-texels"), metavar="K",
+                   help="texels the accurate reference is computed at (default: all up to 128², else 2000 random)")
+    p.add_argument("--sh-orders", type=lambda t: [int(o) for o in t.split(",")] if t else [],
+                   default=list(DEFAULT_SH_ORDERS), metavar="O,O,...",
+                   help="orders of the SH error-against-order study (default " + ",".join(map(str, DEFAULT_SH_ORDERS)) + "; empty to skip)")
+    p.set_defaults(run=cmd_compare_methods)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")

@@ -32,6 +32,8 @@ from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, angl
 from arsim.lighting.phong import phong_zonal_coefficients
 
 MAX_ORDER = 512
+# Up to this order the maps are evaluated directly at every texel (exact); beyond, through a grid.
+DIRECT_MAX_ORDER = 16
 
 
 def sh_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -271,6 +273,26 @@ def synthesis_grid_size(order: int) -> tuple[int, int]:
     return n_theta, 2 * (n_theta - 1)
 
 
+def sh_evaluate(coeffs: np.ndarray, kappas: np.ndarray, directions: np.ndarray, faithful: bool = False) -> np.ndarray:
+    """sum_lm kappa_l c_lm Y_lm evaluated directly at directions (K, 3): (E, K, C). Costs order² K; the
+    maps use it up to DIRECT_MAX_ORDER and the synthesis grid beyond."""
+    n_maps, order = kappas.shape
+    theta, phi = sh_angles(directions)
+    out = np.zeros((n_maps, theta.size, coeffs.shape[1]))
+    for m, p in _Legendre(theta, order, faithful):
+        ls = np.arange(m, order)
+        if faithful:
+            p = np.nan_to_num(p, nan=0.0, posinf=0.0, neginf=0.0)
+        for e in range(n_maps):
+            radial = p.T @ (kappas[e, m:, None] * coeffs[ls * (ls + 1) + m])  # (K, C)
+            if m == 0:
+                out[e] += radial
+            else:
+                radial_sin = p.T @ (kappas[e, m:, None] * coeffs[ls * (ls + 1) - m])
+                out[e] += np.sqrt(2.0) * (radial * np.cos(m * phi)[:, None] + radial_sin * np.sin(m * phi)[:, None])
+    return out
+
+
 def probe_with_weights(env: np.ndarray) -> np.ndarray:
     """The angle map with a fourth channel of ones: its SH coefficients carry the texel weights' own
     (normalising) sum beside the radiance, as Alg. 4.1 divides by sum f W."""
@@ -294,11 +316,14 @@ def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[i
     for o in sorted(set(orders)):
         which = [k for k, ok in enumerate(orders) if ok == o]
         kappas = np.stack([phong_zonal_coefficients(exponents[k], o) for k in which])
-        size = synthesis_grid_size(o)
-        grid = sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful)
-        sample = _disk_sampler(n, *size)
-        for g, k in zip(grid, which):
-            values = sample(g)
+        if o <= DIRECT_MAX_ORDER:
+            all_values = sh_evaluate(coeffs[: o * o], kappas, anglemap_directions(n)[inside], faithful)
+        else:
+            size = synthesis_grid_size(o)
+            grid = sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful)
+            sample = _disk_sampler(n, *size)
+            all_values = [sample(g) for g in grid]
+        for values, k in zip(all_values, which):
             if normalise:
                 den = values[:, 3:]
                 values = np.divide(values[:, :3], den, out=np.zeros_like(values[:, :3]), where=den > 0)

@@ -1,0 +1,23 @@
+"""Error metrics of the thesis (eq. 6.1/6.2), as pinned in DESIGN.md section 3."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MapError:
+    mean_percent: float
+    max_percent: float
+
+
+def map_error(reference: np.ndarray, value: np.ndarray) -> MapError:
+    """Per texel and channel |a - v| / (a + eps), eps = 1e-4 mean(a), over the given texels (..., 3):
+    its mean and maximum in percent. Pass only texels inside the disk."""
+    a = np.asarray(reference, dtype=np.float64)
+    v = np.asarray(value, dtype=np.float64)
+    eps = 1e-4 * a.mean()
+    rel = np.abs(a - v) / (a + eps)
+    return MapError(float(100 * rel.mean()), float(100 * rel.max()))

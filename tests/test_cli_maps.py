@@ -1,0 +1,78 @@
+"""arsim bake and arsim compare-methods: the files they write, and one-line errors for bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from arsim.core.hdr_io import read_hdr, write_exr
+from tests.conftest import ENVMAPS
+from tests.test_cli import arsim, assert_one_line_error
+
+
+@pytest.fixture(scope="module")
+def probe32(tmp_path_factory):
+    path = tmp_path_factory.mktemp("probe") / "probe32.exr"
+    r = arsim("convert", ENVMAPS[1], path, "--layout", "anglemap", "--size", "32")
+    assert r.returncode == 0, r.stderr
+    return path
+
+
+def test_bake_writes_the_maps_and_bake_json(tmp_path, probe32):
+    r = arsim("bake", probe32, "-o", tmp_path / "maps", "--method", "fast", "--spec", "1,10,80,2.5")
+    assert r.returncode == 0, r.stderr
+    names = sorted(p.name for p in (tmp_path / "maps").iterdir())
+    assert names == ["bake.json", "irradiance.exr", "reflection_s10.exr", "reflection_s2.5.exr", "reflection_s80.exr"]
+    record = json.loads((tmp_path / "maps" / "bake.json").read_text())
+    assert record["method"] == "fast" and record["size"] == 32
+    assert set(record["maps"]) == set(names) - {"bake.json"}
+    assert record["seconds_total"] >= sum(m["seconds"] for m in record["maps"].values())
+    irradiance = read_hdr(tmp_path / "maps" / "irradiance.exr")
+    assert irradiance.shape == (32, 32, 3) and np.isfinite(irradiance).all() and irradiance.max() > 0
+
+
+def test_bake_resamples_an_equirect_to_the_requested_size(tmp_path):
+    r = arsim("bake", ENVMAPS[1], "-o", tmp_path, "--method", "mipmap", "--size", "64", "--spec", "1")
+    assert r.returncode == 0, r.stderr
+    assert read_hdr(tmp_path / "irradiance.exr").shape == (64, 64, 3)
+
+
+def test_sh_parameters_are_recorded(tmp_path, probe32):
+    r = arsim("bake", probe32, "-o", tmp_path, "--method", "sh", "--sh-order", "9", "--sh-faithful", "--spec", "1")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "bake.json").read_text())["parameters"] == {"sh_order": 9, "sh_faithful": True}
+
+
+def test_compare_methods_writes_tables_and_figures(tmp_path, probe32):
+    r = arsim("compare-methods", probe32, "-o", tmp_path, "--spec", "1,20", "--methods", "fast,mipmap,sh",
+              "--sh-orders", "3,6")
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["methods.png", "sh_order.png", "tables.json", "tables.md"]
+    tables = json.loads((tmp_path / "tables.json").read_text())
+    assert set(tables["errors_percent"]) == {"fast", "mipmap", "sh"}
+    assert tables["errors_percent"]["fast"][0]["mean"] < 0.5
+    assert len(tables["sh_mean_error_percent_by_order"]["stable"]) == 2
+    assert "| fast |" in (tmp_path / "tables.md").read_text()
+
+
+def test_bad_map_inputs_give_one_line_and_exit_status_2(tmp_path, probe32):
+    nan_env = np.ones((16, 16, 3), np.float32)
+    nan_env[4, 4] = np.nan
+    write_exr(tmp_path / "nan.exr", nan_env)
+    write_exr(tmp_path / "odd.exr", np.ones((24, 24, 3), np.float32))
+    out = tmp_path / "out"
+    cases = [
+        (["--spec", "1,0"], ["Phong exponent 0", "positive"]),
+        (["--spec", "-5"], ["Phong exponent -5"]),
+        (["--spec", "1,abc"], ["'abc' is not a number"]),
+        (["--size", "100"], ["size 100", "power of two"]),
+        (["--size", "4"], ["size 4", "power of two from 8"]),
+        (["--sh-order", "0", "--method", "sh"], ["--sh-order 0", "at least 1"]),
+        (["--method", "magic"], ["invalid choice", "magic"]),
+    ]
+    for extra, fragments in cases:
+        assert_one_line_error(arsim("bake", probe32, "-o", out, *extra), *fragments)
+    assert_one_line_error(arsim("bake", tmp_path / "nan.exr", "-o", out), "NaN or Inf")
+    assert_one_line_error(arsim("bake", tmp_path / "odd.exr", "-o", out), "24", "power of two")
+    assert_one_line_error(arsim("compare-methods", probe32, "-o", out, "--methods", "fast,nope"), "map method 'nope'")
+    assert not out.exists() or not any(out.iterdir())
