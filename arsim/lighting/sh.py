@@ -21,6 +21,7 @@ P_l^m infinite, whose product is NaN, which Alg. 4.7 (lines 25-33) zeroes.
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -54,15 +55,24 @@ def sh_index(l: int, m: int) -> int:
 
 
 def _legendre_stable(m: int, order: int, x: np.ndarray, p_mm: np.ndarray) -> np.ndarray:
-    """Orthonormalised P~_lm (Y_l0 = P~_l0) for l = m..order-1 given P~_mm; shape (order-m, len(x))."""
+    """Orthonormalised P~_lm (Y_l0 = P~_l0) for l = m..order-1 given P~_mm; shape (order-m, len(x)).
+
+    P~_lm = a (x P~_(l-1)m) - a b P~_(l-2)m, written with in-place products: this loop is most of the
+    time of a high-order SH bake."""
     out = np.empty((order - m, x.size))
     out[0] = p_mm
     if order - m > 1:
-        out[1] = np.sqrt(2 * m + 3) * x * p_mm
+        np.multiply(x, p_mm, out=out[1])
+        out[1] *= math.sqrt(2 * m + 3)
+    scratch = np.empty(x.size)
     for l in range(m + 2, order):
-        a = np.sqrt((4 * l * l - 1) / (l * l - m * m))
-        b = np.sqrt(((l - 1) ** 2 - m * m) / (4 * (l - 1) ** 2 - 1))
-        out[l - m] = a * (x * out[l - m - 1] - b * out[l - m - 2])
+        a = math.sqrt((4 * l * l - 1) / (l * l - m * m))
+        ab = a * math.sqrt(((l - 1) ** 2 - m * m) / (4 * (l - 1) ** 2 - 1))
+        current = out[l - m]
+        np.multiply(x, out[l - m - 1], out=current)
+        current *= a
+        np.multiply(out[l - m - 2], ab, out=scratch)
+        current -= scratch
     return out
 
 
@@ -186,7 +196,8 @@ def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False) -> np.n
     for m, p in _Legendre(orbits.theta, order, faithful):
         if m > 0:
             z = z * step
-        per_orbit = z[:, None] * partial[0, m % 4] + np.conj(z)[:, None] * partial[1, m % 4]
+        per_orbit = z[:, None] * partial[0, m % 4]
+        per_orbit += np.conj(z)[:, None] * partial[1, m % 4]
         ring_sums = np.add.reduceat(per_orbit, orbits.ring_starts, axis=0)  # (R, 3): sum L W e^{i m phi}
         ls = np.arange(m, order)
         with np.errstate(invalid="ignore", over="ignore"):
@@ -250,8 +261,11 @@ class _GridSampler:
 
     def __call__(self, grid: np.ndarray) -> np.ndarray:
         """(K, C) samples of a (C, n_theta, n_phi) grid."""
-        flat = grid.reshape(grid.shape[0], -1)
-        return sum(w * flat[:, i] for i, w in zip(self.index, self.weight)).T
+        texels = np.ascontiguousarray(grid.reshape(grid.shape[0], -1).T)  # one gather fetches all channels
+        out = self.weight[0][:, None] * texels[self.index[0]]
+        for i, w in zip(self.index[1:], self.weight[1:]):
+            out += w[:, None] * texels[i]
+        return out
 
 
 @functools.lru_cache(maxsize=8)
