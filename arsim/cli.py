@@ -11,13 +11,13 @@ import numpy as np
 
 from arsim import __version__
 from arsim.core.errors import ArsimError
-from arsim.core.files import write_text_atomic
-from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_exr, write_image
+from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
 from arsim.core.image_stats import image_stats
 from arsim.core.progress import progress_bar
 from arsim.core.resample import LAYOUTS, detect_layout, to_layout
 from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_comparison
-from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method, parameters_used
+from arsim.lighting.bake_output import write_bake
+from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 
 MAX_SIZE = 16384
@@ -99,9 +99,13 @@ def cmd_convert(args: argparse.Namespace) -> int:
 # arsim bake, arsim compare-methods
 
 
+def _is_map_size(n: int) -> bool:
+    return n >= 8 and n & (n - 1) == 0
+
+
 def _map_size(text: str) -> int:
     value = _size(text)
-    if value < 8 or value & (value - 1):
+    if not _is_map_size(value):
         raise argparse.ArgumentTypeError(f"size {value} is not allowed: maps need a power of two from 8 up (64, 128, 256, 512, ...)")
     return value
 
@@ -115,6 +119,8 @@ def _exponents(text: str) -> list[float]:
             raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()!r} is not a number; give e.g. --spec 1,10,80") from None
         if not (np.isfinite(value) and value > 0):
             raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()} is not allowed: exponents must be positive")
+        if value in values:
+            raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()} is given twice; give each once")
         values.append(value)
     return values
 
@@ -132,19 +138,12 @@ def _positive_int(name: str):
     return parse
 
 
-def map_filename(exponent: float) -> str:
-    """irradiance.exr for s = 1, reflection_s<S>.exr otherwise (DESIGN.md section 4)."""
-    if exponent == 1:
-        return "irradiance.exr"
-    return f"reflection_s{int(exponent) if float(exponent).is_integer() else f'{exponent:g}'}.exr"
-
-
 def _probe(path: Path, size: int | None) -> np.ndarray:
     """The environment as an angle map of the given size; an angle map of that size is used as it is."""
     image, _ = replace_nonfinite(read_hdr(path), "refuse", str(path))
     layout = detect_layout(image, str(path))
     if layout == "anglemap" and size in (None, image.shape[0]):
-        if image.shape[0] < 8 or image.shape[0] & (image.shape[0] - 1):
+        if not _is_map_size(image.shape[0]):
             raise ArsimError(f"{path}: angle map size {image.shape[0]} is not a power of two from 8 up; pass --size 256 (or 512, ...)")
         return image
     return to_layout(image, "anglemap", size or 512)
@@ -167,22 +166,8 @@ def cmd_bake(args: argparse.Namespace) -> int:
     params = _parameters(args)
     with progress_bar(f"baking {len(args.spec)} maps ({args.method})", len(args.spec)) as update:
         result = bake(env, args.spec, args.method, params, progress=lambda k: update(completed=k))
-    files = {}
-    for s, m, seconds in zip(args.spec, result.maps, result.seconds_per_map):
-        name = map_filename(s)
-        write_exr(out / name, m)
-        files[name] = {"exponent": s, "seconds": round(seconds, 4)}
-    record = {
-        "method": args.method,
-        "parameters": parameters_used(args.method, params),
-        "environment": str(args.env),
-        "size": int(env.shape[0]),
-        "maps": files,
-        "seconds_shared": round(result.seconds_shared, 4),
-        "seconds_total": round(result.seconds_total, 4),
-    }
-    write_text_atomic(out / "bake.json", json.dumps(record, indent=2) + "\n")
-    print(f"wrote {len(files)} maps ({args.method}, {env.shape[0]}² angle maps) to {out} in {result.seconds_total:.2f} s")
+    write_bake(out, args.spec, args.method, params, result, str(args.env))
+    print(f"wrote {len(args.spec)} maps ({args.method}, {env.shape[0]}² angle maps) to {out} in {result.seconds_total:.2f} s")
     return 0
 
 
@@ -191,10 +176,16 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
         method(name)  # an unknown name fails here, before any work
     env = _probe(args.env, args.size)
     out = _output_dir(args.output)
+    stages = 0
+
+    def on_stage(stage: str) -> None:
+        nonlocal stages
+        update(completed=stages, description=stage)
+        stages += 1
+
     with progress_bar("comparing methods", len(args.methods) + 3) as update:
-        steps = iter(range(1, 100))
         comparison = compare(env, args.spec, args.methods, _parameters(args), args.reference_texels,
-                             args.sh_orders, progress=lambda stage: update(completed=next(steps) - 1, description=stage))
+                             args.sh_orders, progress=on_stage)
     paths = write_comparison(comparison, out)
     for name, errors in comparison.errors.items():
         worst_mean = max(e["mean"] for e in errors)

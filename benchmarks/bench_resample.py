@@ -4,23 +4,14 @@
 """
 
 import argparse
-import time
 from pathlib import Path
 
+from timing import best_of
 
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import supersampling_factor, to_layout
 
 ASSET = Path(__file__).resolve().parents[1] / "assets" / "envmaps" / "city.exr"
-
-
-def best_of(repeat: int, fn) -> float:
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
 
 
 def main() -> None:

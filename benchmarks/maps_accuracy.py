@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from timing import best_of
+
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
@@ -37,15 +39,6 @@ def reference_texels(env: np.ndarray, count: int) -> np.ndarray:
     return np.unique(np.r_[picked, near[inside[near]]])
 
 
-def best_of(repeat: int, fn) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
-
-
 def row(errors) -> str:
     return "  ".join(f"{e.mean_percent:6.3f}/{e.max_percent:5.2f}" for e in errors)
 
@@ -56,7 +49,7 @@ def main() -> None:
     parser.add_argument("--texels", type=int, default=1000)
     args = parser.parse_args()
     header = "  ".join(f"{f's={s}':>12}" for s in EXPONENTS)
-    print(f"mean/max error (%) per exponent; fast at 512² against accurate at sampled texels, 128² at all\n")
+    print("mean/max error (%) per exponent; fast at 512² against accurate at sampled texels, 128² at all\n")
     for name in args.assets.split(","):
         source = read_hdr(ROOT / "assets" / "envmaps" / f"{name}.exr")
         env = to_layout(source, "anglemap", 512)
@@ -84,7 +77,7 @@ def main() -> None:
                     key=lambda r: r.seconds_total)
         print(f"  sh order 128 at 512²: {sh128.seconds_total:.2f} s coefficients and nine maps, best of 3 "
               f"({sh128.seconds_shared:.2f} s coefficients); all finite: {bool(np.isfinite(sh128.maps).all())}")
-        print(f"  sh mean error (%) by order, s <= 320:")
+        print("  sh mean error (%) by order, s <= 320:")
         table = []
         for order in SH_ORDERS:
             maps = sh_maps(env, EXPONENTS, order).reshape(len(EXPONENTS), -1, 3)[:, texels]

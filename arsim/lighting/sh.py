@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft
-from scipy import ndimage
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.lighting.phong import phong_zonal_coefficients

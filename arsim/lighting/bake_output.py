@@ -1,0 +1,40 @@
+"""A bake on disk (DESIGN.md section 4): irradiance.exr, reflection_s<S>.exr and bake.json in one folder."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+from arsim.core.files import write_text_atomic
+from arsim.core.hdr_io import write_exr
+from arsim.lighting.methods import BakeResult, MapParameters, parameters_used
+
+
+def map_filename(exponent: float) -> str:
+    """irradiance.exr for s = 1, reflection_s<S>.exr otherwise (S without a trailing .0)."""
+    if exponent == 1:
+        return "irradiance.exr"
+    return f"reflection_s{int(exponent) if float(exponent).is_integer() else f'{exponent:g}'}.exr"
+
+
+def write_bake(out_dir: Path, exponents: Sequence[float], method: str, params: MapParameters,
+               result: BakeResult, source: str) -> list[Path]:
+    """Write every map (atomically) and bake.json with method, parameters and timings; returns the paths."""
+    files, paths = {}, []
+    for s, image, seconds in zip(exponents, result.maps, result.seconds_per_map):
+        name = map_filename(s)
+        write_exr(out_dir / name, image)
+        files[name] = {"exponent": float(s), "seconds": round(seconds, 4)}
+        paths.append(out_dir / name)
+    record = {
+        "method": method,
+        "parameters": parameters_used(method, params),
+        "environment": source,
+        "size": int(result.maps.shape[1]),
+        "maps": files,
+        "seconds_shared": round(result.seconds_shared, 4),
+        "seconds_total": round(result.seconds_total, 4),
+    }
+    write_text_atomic(out_dir / "bake.json", json.dumps(record, indent=2) + "\n")
+    return paths + [out_dir / "bake.json"]
