@@ -221,3 +221,22 @@ def test_environment_with_nan_is_refused(courtyard32):
     env[3, 3, 0] = np.nan
     with pytest.raises(ArsimError, match="NaN"):
         bake(env, [1], "accurate")
+
+
+def test_sh_coefficients_are_texel_sums_of_scipys_spherical_harmonics():
+    from scipy.special import sph_harm_y
+
+    from arsim.lighting.sh import sh_angles
+
+    n, order = 24, 7
+    env = np.random.default_rng(5).random((n, n, 3))
+    inside = anglemap_disk_mask(n)
+    theta, phi = sh_angles(anglemap_directions(n)[inside])
+    lw = env[inside] * anglemap_solid_angles(n)[inside][:, None]
+    expected = np.zeros((order * order, 3))
+    for l in range(order):
+        for m in range(-l, l + 1):
+            y = sph_harm_y(l, abs(m), theta, phi)  # Condon-Shortley phase, as eq. 2.27
+            real = np.sqrt(2) * (y.real if m > 0 else y.imag) if m else y.real
+            expected[l * (l + 1) + m] = real @ lw
+    np.testing.assert_allclose(sh_coefficients(env, order), expected, atol=1e-13)
