@@ -239,10 +239,12 @@ def sh_synthesis_grid(coeffs: np.ndarray, kappas: np.ndarray, n_theta: int, n_ph
 
 @dataclass(frozen=True)
 class _GridSampler:
-    """Bilinear lookups of (theta, phi) grids at fixed directions: indices and weights computed once."""
+    """Bilinear lookups of (theta, phi) grids at fixed directions: indices and weights computed once,
+    and the lookups made in grid order (then put back), so that the gathers walk memory forwards."""
 
     index: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     weight: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    order: np.ndarray  # lookup k is for direction order[k]
 
     @classmethod
     def of(cls, directions: np.ndarray, n_theta: int, n_phi: int) -> _GridSampler:
@@ -256,14 +258,17 @@ class _GridSampler:
         c1 = (c0 + 1) % n_phi  # longitude wraps
         index = (r0 * n_phi + c0, r0 * n_phi + c1, (r0 + 1) * n_phi + c0, (r0 + 1) * n_phi + c1)
         weight = ((1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc)
-        return cls(index, weight)
+        order = np.argsort(index[0], kind="stable")
+        return cls(tuple(i[order] for i in index), tuple(w[order, None] for w in weight), order)
 
     def __call__(self, grid: np.ndarray) -> np.ndarray:
         """(K, C) samples of a (C, n_theta, n_phi) grid."""
         texels = np.ascontiguousarray(grid.reshape(grid.shape[0], -1).T)  # one gather fetches all channels
-        out = self.weight[0][:, None] * texels[self.index[0]]
+        values = self.weight[0] * texels[self.index[0]]
         for i, w in zip(self.index[1:], self.weight[1:]):
-            out += w[:, None] * texels[i]
+            values += w * texels[i]
+        out = np.empty_like(values)
+        out[self.order] = values
         return out
 
 
