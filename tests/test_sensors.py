@@ -1,0 +1,85 @@
+"""Synthetic IMU: consistent with its trajectory, noise statistics as configured, deterministic."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from arsim.core.conventions import CameraIntrinsics
+from arsim.core.errors import ArsimError
+from arsim.evaluate.allan import allan_deviation, fit_white_and_random_walk
+from arsim.sensors.coverage import sphere_coverage
+from arsim.sensors.imu import ACCELEROMETER, GYROSCOPE, SensorModel, draw_errors, simulate, simulate_imu
+from arsim.sensors.orientation import integrate_gyroscope
+from arsim.sensors.trajectory import GRAVITY, CaptureSweep, Static
+
+
+def test_angular_velocity_is_the_derivative_of_the_orientation():
+    sweep = CaptureSweep()
+    t = np.array([0.5, 13.3, 30.0, 47.1])
+    h = 1e-5
+    numeric = (sweep.orientation(t - h).inv() * sweep.orientation(t + h)).as_rotvec() / (2 * h)
+    np.testing.assert_allclose(sweep.angular_velocity(t), numeric, atol=1e-8)
+
+
+def test_integrating_the_noise_free_gyroscope_reproduces_the_orientation():
+    sweep = CaptureSweep()
+    ideal = SensorModel(rate_hz=200.0, noise_density=0.0)
+    stream = simulate("gyroscope", ideal, sweep.angular_velocity, sweep.duration, np.random.default_rng(0))
+    t = stream.t_ns / 1e9
+    estimate = integrate_gyroscope(t, stream.values, sweep.orientation(t[:1])[0])
+    error = (sweep.orientation(t[0::2]).inv() * estimate).magnitude()
+    assert error.max() < 1e-6
+
+
+def test_gyroscope_white_noise_and_random_walk_match_their_settings():
+    # The Gauss-Markov bias instability is switched off here: its bump would bias a two-term fit.
+    model = replace(GYROSCOPE, bias_instability=0.0)
+    static = Static(duration=3 * 3600)
+    stream = simulate("gyroscope", model, static.angular_velocity, static.duration, np.random.default_rng(0))
+    taus = np.geomspace(0.01, 900, 40)
+    adev = allan_deviation(stream.values, model.rate_hz, taus)
+    fits = np.array([fit_white_and_random_walk(taus, adev[:, axis]) for axis in range(3)])
+    white, walk = fits.mean(axis=0)
+    assert white == pytest.approx(model.noise_density, rel=0.10)
+    assert walk == pytest.approx(model.bias_random_walk, rel=0.10)
+
+
+def test_static_accelerometer_reads_gravity_plus_its_bias():
+    static = Static(duration=60.0)
+    rng = np.random.default_rng(2)
+    errors = draw_errors(ACCELEROMETER, np.random.default_rng(3))
+    stream = simulate("accelerometer", ACCELEROMETER, static.specific_force, static.duration, rng, errors)
+    expected = errors.matrix @ np.array([0.0, 0.0, -GRAVITY[1]]) + errors.turn_on_bias  # flat, screen up: +z
+    # What is left is the slow bias terms (Gauss-Markov 2e-3 m/s², random walk) and averaged white noise.
+    np.testing.assert_allclose(stream.values.mean(axis=0), expected, atol=0.01)
+    assert abs(np.linalg.norm(stream.values.mean(axis=0)) - 9.80665) < 0.8  # within the turn-on bias
+
+
+def test_same_seed_same_streams_other_seed_other_streams():
+    sweep = CaptureSweep(duration=5.0)
+    a = simulate_imu(sweep, np.random.default_rng(11))
+    b = simulate_imu(sweep, np.random.default_rng(11))
+    c = simulate_imu(sweep, np.random.default_rng(12))
+    for name in a:
+        assert np.array_equal(a[name].values, b[name].values) and np.array_equal(a[name].t_ns, b[name].t_ns)
+        assert not np.array_equal(a[name].values, c[name].values)
+
+
+def test_timestamps_increase_at_the_configured_rates():
+    streams = simulate_imu(CaptureSweep(duration=10.0), np.random.default_rng(4))
+    for name, rate in (("gyroscope", 200.0), ("accelerometer", 200.0), ("magnetometer", 50.0)):
+        t = streams[name].t_ns
+        assert np.all(np.diff(t) > 0)
+        assert np.mean(np.diff(t)) / 1e9 == pytest.approx(1.0 / rate, rel=1e-3)
+
+
+def test_the_default_capture_sweep_sees_the_whole_sphere():
+    assert sphere_coverage(CaptureSweep(), CameraIntrinsics.from_fov(640, 480, 60.0), fps=30.0) >= 0.99
+
+
+@pytest.mark.parametrize("bad", [{"noise_density": -1.0}, {"rate_hz": 0.0}, {"jitter_s": -1e-3}])
+def test_bad_sensor_settings_are_refused(bad):
+    model = replace(GYROSCOPE, **bad)
+    with pytest.raises(ArsimError):
+        simulate("gyroscope", model, Static().angular_velocity, 1.0, np.random.default_rng(0))
