@@ -83,3 +83,25 @@ def test_bad_sensor_settings_are_refused(bad):
     model = replace(GYROSCOPE, **bad)
     with pytest.raises(ArsimError):
         simulate("gyroscope", model, Static().angular_velocity, 1.0, np.random.default_rng(0))
+
+
+def test_game_rotation_vector_drifts_in_yaw_and_rotation_vector_does_not():
+    from arsim.sensors.fusion import mahony, tilt_error_deg, yaw_error_deg
+
+    static = Static(duration=60.0, pitch_deg=-30.0)
+    biased = replace(GYROSCOPE, turn_on_bias=0.0)
+    streams = simulate_imu(static, np.random.default_rng(5), gyroscope=biased)
+    streams["gyroscope"] = replace(streams["gyroscope"], values=streams["gyroscope"].values + np.deg2rad([0.3, 0.3, 0.3]))
+    start = static.orientation([0.0])[0]
+    results = {}
+    for mode in ("game-rotation-vector", "rotation-vector"):
+        t, estimate = mahony(streams, start, mode)
+        truth = static.orientation(t / 1e9)
+        results[mode] = (yaw_error_deg(estimate, truth)[-1], tilt_error_deg(estimate, truth)[-1])
+    game_yaw, game_tilt = results["game-rotation-vector"]
+    mag_yaw, mag_tilt = results["rotation-vector"]
+    assert abs(game_yaw) > 5.0  # 0.3 deg/s on every axis, nothing to stop it
+    assert abs(mag_yaw) < 2.0  # the magnetometer holds the heading
+    # Gravity holds pitch and roll, up to the accelerometer's own errors: 20 mg turn-on bias per axis
+    # (up to 1.6 degrees), 0.6-degree misalignments, and the gyroscope bias over kp (0.3 degrees).
+    assert game_tilt < 4.5 and mag_tilt < 4.5
