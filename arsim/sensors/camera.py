@@ -1,0 +1,157 @@
+"""The phone camera after the lens: sensor noise, vignetting, the response curve, 8-bit frames, and the
+auto-exposure loop that picks exposure time and ISO frame by frame, a few frames late.
+
+Units: scene radiance is linear (the environment's units). At base ISO, a pixel saturates when
+radiance * exposure_s * `sensitivity` reaches 1; ISO multiplies the signal (analog gain) after the
+shot noise, so high ISO costs signal-to-noise as on a real sensor.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from arsim.core.errors import ArsimError
+
+RESPONSES = ("srgb", "gamma", "s-curve")
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass(frozen=True)
+class ResponseCurve:
+    """Maps relative linear exposure in [0, 1] to display values in [0, 1] and back.
+
+    srgb: the sRGB transfer function; gamma: x^(1/gamma); s-curve: sRGB followed by a contrast S
+    (0.5 + 0.5 tanh(c (y - 0.5)) / tanh(c / 2)) as phone pipelines add."""
+
+    kind: str = "s-curve"
+    gamma: float = 2.2
+    contrast: float = 2.0
+
+    def __post_init__(self):
+        if self.kind not in RESPONSES:
+            raise ArsimError(f"response curve '{self.kind}' is unknown; use one of {', '.join(RESPONSES)}")
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+        if self.kind == "gamma":
+            return x ** (1.0 / self.gamma)
+        y = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+        if self.kind == "s-curve":
+            c = self.contrast
+            y = 0.5 + 0.5 * np.tanh(c * (y - 0.5)) / np.tanh(c / 2)
+        return y
+
+    def inverse(self, y: np.ndarray) -> np.ndarray:
+        y = np.clip(np.asarray(y, dtype=np.float64), 0.0, 1.0)
+        if self.kind == "gamma":
+            return y**self.gamma
+        if self.kind == "s-curve":
+            c = self.contrast
+            y = 0.5 + np.arctanh(np.clip((2 * y - 1) * np.tanh(c / 2), -1 + 1e-15, 1 - 1e-15)) / c
+        return np.where(y <= 0.04045, y / 12.92, ((y + 0.055) / 1.055) ** 2.4)
+
+
+@dataclass(frozen=True)
+class SensorSettings:
+    """Noise and limits of the image sensor and its auto-exposure."""
+
+    sensitivity: float = 4.0  # 1 / (radiance * s) that saturates a pixel at base ISO
+    full_well_e: float = 6000.0  # electrons at saturation, base ISO
+    read_noise_e: float = 3.0
+    base_iso: float = 100.0
+    iso_range: tuple[float, float] = (100.0, 3200.0)
+    exposure_range_s: tuple[float, float] = (1e-5, 1.0 / 30.0)
+    vignetting: float = 0.3  # relative fall-off at the image corners
+    target_grey: float = 0.18  # metered linear level the auto-exposure aims for
+    convergence: float = 0.6  # fraction of the log error corrected per frame
+    latency_frames: int = 3  # frames before a new exposure takes effect
+    clipped_step: float = 4.0  # extra factor when most of a frame is clipped (its level is unknown)
+    settle_frames: int = 16  # promise: within 10 % of the target this many frames after a step
+
+    def check(self) -> None:
+        if not (0 < self.iso_range[0] <= self.iso_range[1]):
+            raise ArsimError(f"ISO range {self.iso_range} is not allowed: give 0 < min <= max")
+        if not (0 < self.exposure_range_s[0] <= self.exposure_range_s[1]):
+            raise ArsimError(f"exposure range {self.exposure_range_s} s is not allowed: give 0 < min <= max")
+        if not 0 < self.convergence <= 1:
+            raise ArsimError(f"auto-exposure convergence {self.convergence} is not allowed: give (0, 1]")
+        if self.latency_frames < 0 or self.read_noise_e < 0 or self.full_well_e <= 0:
+            raise ArsimError("latency, read noise must be 0 or more and the full well positive")
+
+
+def vignette(height: int, width: int, strength: float) -> np.ndarray:
+    """Relative illumination (H, W): 1 at the centre, 1 - strength at the corners, smooth (r^4 law)."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    r2 = ((x - (width - 1) / 2) ** 2 + (y - (height - 1) / 2) ** 2) / (((width - 1) / 2) ** 2 + ((height - 1) / 2) ** 2)
+    return 1.0 - strength * r2 * r2
+
+
+def expose(radiance: np.ndarray, exposure_s: float, iso: float, sensor: SensorSettings, response: ResponseCurve,
+           rng: np.random.Generator, falloff: np.ndarray | None = None) -> np.ndarray:
+    """An 8-bit RGB frame (H, W, 3) of the scene radiance: photons to electrons with shot and read
+    noise, analog gain, clipping, the response curve, and quantisation."""
+    falloff = vignette(*radiance.shape[:2], sensor.vignetting) if falloff is None else falloff
+    relative = radiance * (exposure_s * sensor.sensitivity) * falloff[..., None]
+    electrons = np.maximum(relative * sensor.full_well_e, 0.0)
+    electrons = electrons + rng.standard_normal(electrons.shape) * np.sqrt(electrons + sensor.read_noise_e**2)
+    signal = electrons / sensor.full_well_e * (iso / sensor.base_iso)
+    return np.round(response.apply(signal) * 255.0).astype(np.uint8)
+
+
+def metered_level(frame: np.ndarray, response: ResponseCurve) -> float:
+    """Centre-weighted mean linear luminance of an 8-bit frame (what the auto-exposure measures)."""
+    linear = response.inverse(frame.astype(np.float64) / 255.0) @ LUMA
+    h, w = linear.shape
+    y, x = np.mgrid[0:h, 0:w]
+    weight = np.exp(-(((x - w / 2) / (0.35 * w)) ** 2 + ((y - h / 2) / (0.35 * h)) ** 2))
+    return float((linear * weight).sum() / weight.sum())
+
+
+@dataclass
+class AutoExposure:
+    """Frame-by-frame exposure control: meter the last frame, move the exposure product a fraction of
+    the way (in log) towards the target, and apply the result `latency_frames` later. The product is
+    split into exposure time first (up to its limit), then ISO."""
+
+    sensor: SensorSettings
+    response: ResponseCurve
+    product: float = 1.0 / 30.0  # exposure_s * iso / base_iso
+    pending: deque = field(default_factory=deque)
+
+    def __post_init__(self):
+        self.sensor.check()
+        self.pending = deque([self.product] * self.sensor.latency_frames)
+
+    def settings(self, product: float) -> tuple[float, float]:
+        """(exposure_s, iso) for an exposure product, within the limits."""
+        s = self.sensor
+        exposure = float(np.clip(product, *s.exposure_range_s))
+        iso = float(np.clip(product / exposure * s.base_iso, *s.iso_range))
+        return exposure, iso
+
+    def next_frame_settings(self) -> tuple[float, float]:
+        """The (exposure_s, iso) the next frame is taken with (decided `latency_frames` ago)."""
+        self.pending.append(self.product)
+        return self.settings(self.pending.popleft())
+
+    def update(self, frame: np.ndarray, used: tuple[float, float]) -> None:
+        """Meter a frame taken with `used` settings and steer the product for frames to come."""
+        level = max(metered_level(frame, self.response), 1e-4)
+        used_product = used[0] * used[1] / self.sensor.base_iso
+        wanted = used_product * self.sensor.target_grey / level
+        s = self.sensor
+        lo = s.exposure_range_s[0] * s.iso_range[0] / s.base_iso
+        hi = s.exposure_range_s[1] * s.iso_range[1] / s.base_iso
+        # A mostly white (black) frame only bounds the right product from above (below): jump below
+        # (above) that bound by clipped_step. Frames taken before earlier jumps (latency) repeat an old
+        # bound and change nothing, so the jumps do not compound.
+        if np.mean(frame >= 255) > 0.5:
+            self.product = float(np.clip(min(self.product, wanted / s.clipped_step), lo, hi))
+        elif np.mean(frame <= 0) > 0.5:
+            self.product = float(np.clip(max(self.product, wanted * s.clipped_step), lo, hi))
+        else:
+            step = np.exp(s.convergence * np.log(wanted / self.product))
+            self.product = float(np.clip(self.product * step, lo, hi))

@@ -1,0 +1,88 @@
+"""The camera model: response curves invert, noise is physical, auto-exposure settles in time."""
+
+import numpy as np
+import pytest
+
+from arsim.core.errors import ArsimError
+from arsim.sensors.camera import RESPONSES, AutoExposure, ResponseCurve, SensorSettings, expose, metered_level, vignette
+
+
+@pytest.mark.parametrize("kind", RESPONSES)
+def test_response_curves_are_monotonic_and_invert(kind):
+    curve = ResponseCurve(kind)
+    x = np.linspace(0, 1, 2001)
+    y = curve.apply(x)
+    assert y[0] == pytest.approx(0, abs=1e-12) and y[-1] == pytest.approx(1, abs=1e-12)
+    assert np.all(np.diff(y) > 0)
+    np.testing.assert_allclose(curve.inverse(y), x, atol=1e-9)
+
+
+def test_unknown_response_is_refused():
+    with pytest.raises(ArsimError, match="response curve 'film'"):
+        ResponseCurve("film")
+
+
+def test_shot_noise_grows_with_the_square_root_of_the_signal():
+    sensor = SensorSettings(vignetting=0.0, read_noise_e=0.0)
+    curve = ResponseCurve("gamma", gamma=1.0)  # linear, to read the noise directly
+    rng = np.random.default_rng(0)
+    stds = []
+    for level in (0.1, 0.4):
+        radiance = np.full((200, 200, 3), level / (sensor.sensitivity * 0.01))
+        frame = expose(radiance, 0.01, sensor.base_iso, sensor, curve, rng).astype(float) / 255
+        stds.append(frame.std())
+        assert frame.mean() == pytest.approx(level, abs=0.004)
+    expected = [np.sqrt(level * sensor.full_well_e) / sensor.full_well_e for level in (0.1, 0.4)]
+    np.testing.assert_allclose(stds, expected, rtol=0.1)  # plus a little from 8-bit quantisation
+
+
+def test_vignetting_is_one_at_the_centre_and_falls_to_the_corners():
+    v = vignette(101, 201, 0.3)
+    assert v[50, 100] == pytest.approx(1.0)
+    assert v[0, 0] == pytest.approx(0.7) and v[-1, -1] == pytest.approx(0.7)
+
+
+@pytest.mark.parametrize("dark, bright", [(0.05, 20.0), (0.5, 500.0), (0.005, 5000.0), (20.0, 0.05)])
+def test_auto_exposure_settles_within_its_configured_frames(dark, bright):
+    sensor, curve = SensorSettings(), ResponseCurve()
+    ae = AutoExposure(sensor, curve)
+    rng = np.random.default_rng(1)
+    falloff = vignette(48, 64, sensor.vignetting)
+    levels, settings, extreme = [], [], []
+    for k in range(80):
+        scene = np.full((48, 64, 3), dark if k < 40 else bright)
+        used = ae.next_frame_settings()
+        frame = expose(scene, *used, sensor, curve, rng, falloff)
+        ae.update(frame, used)
+        levels.append(metered_level(frame, curve))
+        settings.append(used)
+        extreme.append(np.all(frame == 255) or np.all(frame == 0))
+    after = np.array(levels[40:])
+    within = np.abs(after / sensor.target_grey - 1) < 0.10
+    assert within[sensor.settle_frames:].all(), after
+    # Never all white or all black for longer than the settling time.
+    run = longest = 0
+    for e in extreme:
+        run = run + 1 if e else 0
+        longest = max(longest, run)
+    assert longest <= sensor.settle_frames
+    exposures, isos = np.array(settings).T
+    assert exposures.min() >= sensor.exposure_range_s[0] and exposures.max() <= sensor.exposure_range_s[1]
+    assert isos.min() >= sensor.iso_range[0] and isos.max() <= sensor.iso_range[1]
+
+
+def test_auto_exposure_stays_within_limits_when_the_scene_is_too_dark():
+    sensor, curve = SensorSettings(), ResponseCurve()
+    ae = AutoExposure(sensor, curve)
+    rng = np.random.default_rng(2)
+    for _ in range(30):
+        used = ae.next_frame_settings()
+        ae.update(expose(np.full((16, 16, 3), 1e-4), *used, sensor, curve, rng), used)
+    assert used == (sensor.exposure_range_s[1], sensor.iso_range[1])
+
+
+def test_bad_sensor_settings_are_refused():
+    with pytest.raises(ArsimError):
+        AutoExposure(SensorSettings(iso_range=(200.0, 100.0)), ResponseCurve())
+    with pytest.raises(ArsimError):
+        AutoExposure(SensorSettings(convergence=0.0), ResponseCurve())
