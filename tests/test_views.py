@@ -1,0 +1,47 @@
+"""Camera views of the environment: the GL renderer agrees with the NumPy reference, and looks where
+the conventions say."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from arsim.core.conventions import CameraIntrinsics, anglemap_st_to_pixel, direction_to_anglemap_st
+from arsim.core.hdr_io import read_hdr
+from arsim.core.resample import to_layout
+from arsim.sensors.trajectory import CAMERA_TO_DEVICE, CaptureSweep
+from arsim.sensors.views import EnvironmentRenderer, environment_view_reference
+from tests.conftest import ENVMAPS
+
+CAMERA = CameraIntrinsics.from_fov(160, 120, 60.0)
+
+
+@pytest.fixture(scope="module")
+def renderer_and_probe():
+    probe = to_layout(read_hdr(ENVMAPS[1]), "anglemap", 256)
+    return EnvironmentRenderer(probe, CAMERA), probe
+
+
+@pytest.mark.parametrize("t", [0.0, 17.0, 30.0, 44.0, 60.0])
+def test_gl_view_matches_the_numpy_reference(renderer_and_probe, t):
+    # Stated tolerance: llvmpipe and GPUs interpolate bilinearly with 8-bit weights, float32 maths.
+    renderer, probe = renderer_and_probe
+    rotation = CaptureSweep().camera_orientation([t])[0]
+    gl = renderer.render(rotation)
+    ref = environment_view_reference(probe, CAMERA, rotation)
+    rel = np.abs(gl - ref) / (ref + 1e-3 * ref.mean())
+    assert rel.max() < 1e-2 and rel.mean() < 1e-3
+
+
+def test_a_bright_direction_appears_at_its_projected_pixel():
+    n = 128
+    probe = np.full((n, n, 3), 0.1, dtype=np.float32)
+    target = np.array([0.3, 0.2, -1.0])
+    target /= np.linalg.norm(target)
+    row, col = (int(round(float(v))) for v in anglemap_st_to_pixel(direction_to_anglemap_st(target), n))
+    probe[row, col] = 1000.0
+    upright = Rotation.from_matrix(CAMERA_TO_DEVICE)  # device upright, camera looking along world -z
+    image = EnvironmentRenderer(probe, CAMERA).render(upright)
+    peak = np.unravel_index(np.argmax(image[..., 0]), image.shape[:2])
+    expected = CAMERA.project(upright.inv().apply(target)[None])[0]  # (u, v)
+    assert abs(peak[1] - expected[0]) <= 2 and abs(peak[0] - expected[1]) <= 2
+    assert expected[0] > CAMERA.cx and expected[1] < CAMERA.cy  # +x is right and +y is up in the picture
