@@ -30,9 +30,123 @@ class EnvironmentSection:
     yaw_deg: float = setting(0.0, min=-360.0, max=360.0, unit="degrees", help="rotation of the environment about world +y")
 
 
+# ---------------------------------------------------------------------------------------------------
+# [device]: the phone's IMU and camera. IMU units are SI as Android reports them (rad/s, m/s², µT).
+# Datasheets print noise densities otherwise: 2.8 mdps/sqrt(Hz) = 4.887e-5 rad/s/sqrt(Hz) and
+# 70 µg/sqrt(Hz) = 6.865e-4 m/s²/sqrt(Hz). Defaults: TDK ICM-42688-P (noise, ranges, 19/18-bit FIFO data)
+# and AKM AK09918 (range, resolution); biases, scale factors and misalignments are typical residuals
+# after a phone's own calibration (no datasheet gives them).
+
+_DEG = 0.017453292519943295
+_G = 9.80665
+
+
+@dataclass(frozen=True)
+class GyroscopeSection:
+    """[device.gyroscope] (rad/s)."""
+
+    rate_hz: float = setting(200.0, min=0.1, max=10000.0, unit="Hz", help="output data rate")
+    noise_density: float = setting(2.8e-3 * _DEG, min=0.0, max=1.0, help="white noise, rad/s/sqrt(Hz)")
+    bias_random_walk: float = setting(2e-5, min=0.0, max=1.0, help="bias random walk, rad/s/sqrt(s)")
+    bias_instability: float = setting(5e-5, min=0.0, max=1.0, help="Gauss-Markov bias, rad/s")
+    bias_correlation_s: float = setting(100.0, min=0.01, max=1e6, unit="s", help="its correlation time")
+    turn_on_bias: float = setting(0.05 * _DEG, min=0.0, max=1.0, help="per-axis turn-on bias, rad/s")
+    scale_factor: float = setting(0.005, min=0.0, max=0.5, help="per-axis scale-factor error (fraction)")
+    misalignment_rad: float = setting(0.005, min=0.0, max=0.5, unit="rad", help="cross-axis terms")
+    full_scale: float = setting(2000 * _DEG, min=0.01, max=1e3, help="saturation, rad/s")
+    resolution: float = setting(4000 * _DEG / 2**19, min=0.0, max=1.0, help="LSB, rad/s (0: none)")
+    jitter_s: float = setting(2e-5, min=0.0, max=0.1, unit="s", help="timestamp jitter")
+
+
+@dataclass(frozen=True)
+class AccelerometerSection:
+    """[device.accelerometer] (m/s²)."""
+
+    rate_hz: float = setting(200.0, min=0.1, max=10000.0, unit="Hz", help="output data rate")
+    noise_density: float = setting(70e-6 * _G, min=0.0, max=10.0, help="white noise, m/s²/sqrt(Hz)")
+    bias_random_walk: float = setting(1e-4, min=0.0, max=10.0, help="bias random walk, m/s²/sqrt(s)")
+    bias_instability: float = setting(2e-3, min=0.0, max=10.0, help="Gauss-Markov bias, m/s²")
+    bias_correlation_s: float = setting(200.0, min=0.01, max=1e6, unit="s", help="its correlation time")
+    turn_on_bias: float = setting(0.02 * _G, min=0.0, max=10.0, help="per-axis turn-on bias, m/s²")
+    scale_factor: float = setting(0.005, min=0.0, max=0.5, help="per-axis scale-factor error (fraction)")
+    misalignment_rad: float = setting(0.01, min=0.0, max=0.5, unit="rad", help="cross-axis terms")
+    full_scale: float = setting(16 * _G, min=0.1, max=1e4, help="saturation, m/s²")
+    resolution: float = setting(32 * _G / 2**18, min=0.0, max=10.0, help="LSB, m/s² (0: none)")
+    jitter_s: float = setting(2e-5, min=0.0, max=0.1, unit="s", help="timestamp jitter")
+
+
+@dataclass(frozen=True)
+class MagnetometerSection:
+    """[device.magnetometer] (µT)."""
+
+    rate_hz: float = setting(50.0, min=0.1, max=10000.0, unit="Hz", help="output data rate")
+    noise_density: float = setting(0.1, min=0.0, max=100.0, help="white noise, µT/sqrt(Hz)")
+    bias_random_walk: float = setting(0.0, min=0.0, max=100.0, help="bias random walk, µT/sqrt(s)")
+    bias_instability: float = setting(0.0, min=0.0, max=100.0, help="Gauss-Markov bias, µT")
+    bias_correlation_s: float = setting(100.0, min=0.01, max=1e6, unit="s", help="its correlation time")
+    turn_on_bias: float = setting(0.5, min=0.0, max=1000.0, help="residual hard iron per axis, µT")
+    scale_factor: float = setting(0.01, min=0.0, max=0.5, help="soft iron per axis (fraction)")
+    misalignment_rad: float = setting(0.01, min=0.0, max=0.5, unit="rad", help="cross-axis terms")
+    full_scale: float = setting(4900.0, min=1.0, max=1e5, help="saturation, µT")
+    resolution: float = setting(0.15, min=0.0, max=100.0, help="LSB, µT (0: none)")
+    jitter_s: float = setting(1e-4, min=0.0, max=0.1, unit="s", help="timestamp jitter")
+
+
+@dataclass(frozen=True)
+class CameraSection:
+    """[device.camera]: the back camera, its sensor and its auto-exposure."""
+
+    width: int = setting(640, min=16, max=8192, unit="pixels", help="image width")
+    height: int = setting(480, min=16, max=8192, unit="pixels", help="image height")
+    hfov_deg: float = setting(60.0, min=1.0, max=179.0, unit="degrees", help="horizontal field of view (under 180)")
+    fps: float = setting(30.0, min=0.1, max=1000.0, unit="Hz", help="frame rate")
+    response: str = setting("s-curve", choices=("srgb", "gamma", "s-curve"), help="response curve")
+    gamma: float = setting(2.2, min=0.1, max=10.0, help="exponent of the gamma response")
+    contrast: float = setting(2.0, min=0.01, max=10.0, help="strength of the S-curve")
+    sensitivity: float = setting(4.0, min=1e-6, max=1e6, help="1/(radiance x s) that saturates a pixel at base ISO")
+    full_well_e: float = setting(6000.0, min=1.0, max=1e7, unit="electrons", help="electrons at saturation")
+    read_noise_e: float = setting(3.0, min=0.0, max=1e4, unit="electrons", help="read noise")
+    base_iso: float = setting(100.0, min=1.0, max=1e5, help="ISO of unit gain")
+    iso_min: float = setting(100.0, min=1.0, max=1e6, help="lowest ISO")
+    iso_max: float = setting(3200.0, min=1.0, max=1e6, help="highest ISO")
+    exposure_min_s: float = setting(1e-5, min=1e-9, max=10.0, unit="s", help="shortest exposure")
+    exposure_max_s: float = setting(1 / 30, min=1e-9, max=10.0, unit="s", help="longest exposure")
+    vignetting: float = setting(0.3, min=0.0, max=1.0, help="fall-off at the corners")
+    target_grey: float = setting(0.18, min=0.001, max=1.0, help="metered level the auto-exposure aims for")
+    convergence: float = setting(0.6, min=0.01, max=1.0, help="fraction of the log error corrected per frame")
+    latency_frames: int = setting(3, min=0, max=30, unit="frames", help="delay before new settings apply")
+    settle_frames: int = setting(16, min=1, max=1000, unit="frames", help="frames the auto-exposure takes to settle")
+
+
+@dataclass(frozen=True)
+class DeviceSection:
+    """[device]: the phone."""
+
+    gyroscope: GyroscopeSection = subsection(GyroscopeSection, help="gyroscope")
+    accelerometer: AccelerometerSection = subsection(AccelerometerSection, help="accelerometer")
+    magnetometer: MagnetometerSection = subsection(MagnetometerSection, help="magnetometer")
+    camera: CameraSection = subsection(CameraSection, help="back camera")
+
+
+@dataclass(frozen=True)
+class CaptureSection:
+    """[capture]: the sweep that captures the light probe."""
+
+    duration_s: float = setting(60.0, min=1.0, max=3600.0, unit="s", help="length of the sweep")
+    turns: float = setting(5.0, min=0.5, max=50.0, help="full turns about the vertical")
+    pitch_from_deg: float = setting(-75.0, min=-90.0, max=90.0, unit="degrees", help="pitch at the start (down)")
+    pitch_to_deg: float = setting(75.0, min=-90.0, max=90.0, unit="degrees", help="pitch at the end (up)")
+    roll_wobble_deg: float = setting(3.0, min=0.0, max=45.0, unit="degrees", help="hand roll wobble")
+    sway_m: float = setting(0.03, min=0.0, max=1.0, unit="m", help="hand sway")
+    fusion: str = setting("game-rotation-vector", choices=("game-rotation-vector", "rotation-vector"),
+                          help="orientation the app reads")
+
+
 @dataclass(frozen=True)
 class Scenario:
     """A whole scenario: one field per TOML section, each a checked, frozen dataclass."""
 
     run: RunSection = subsection(RunSection, help="run name and seed")
     environment: EnvironmentSection = subsection(EnvironmentSection, help="the true HDR environment")
+    device: DeviceSection = subsection(DeviceSection, help="the phone's sensors")
+    capture: CaptureSection = subsection(CaptureSection, help="the capture sweep")

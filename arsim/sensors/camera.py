@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from arsim.core.errors import ArsimError
+from arsim.scenario.sections import CameraSection
 
 RESPONSES = ("srgb", "gamma", "s-curve")
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -26,9 +27,9 @@ class ResponseCurve:
     srgb: the sRGB transfer function; gamma: x^(1/gamma); s-curve: sRGB followed by a contrast S
     (0.5 + 0.5 tanh(c (y - 0.5)) / tanh(c / 2)) as phone pipelines add."""
 
-    kind: str = "s-curve"
-    gamma: float = 2.2
-    contrast: float = 2.0
+    kind: str = CameraSection.response
+    gamma: float = CameraSection.gamma
+    contrast: float = CameraSection.contrast
 
     def __post_init__(self):
         if self.kind not in RESPONSES:
@@ -54,22 +55,32 @@ class ResponseCurve:
         return np.where(y <= 0.04045, y / 12.92, ((y + 0.055) / 1.055) ** 2.4)
 
 
+_DEFAULT = CameraSection()  # the defaults live in the scenario schema
+
+
 @dataclass(frozen=True)
 class SensorSettings:
-    """Noise and limits of the image sensor and its auto-exposure."""
+    """Noise and limits of the image sensor and its auto-exposure ([device.camera])."""
 
-    sensitivity: float = 4.0  # 1 / (radiance * s) that saturates a pixel at base ISO
-    full_well_e: float = 6000.0  # electrons at saturation, base ISO
-    read_noise_e: float = 3.0
-    base_iso: float = 100.0
-    iso_range: tuple[float, float] = (100.0, 3200.0)
-    exposure_range_s: tuple[float, float] = (1e-5, 1.0 / 30.0)
-    vignetting: float = 0.3  # relative fall-off at the image corners
-    target_grey: float = 0.18  # metered linear level the auto-exposure aims for
-    convergence: float = 0.6  # fraction of the log error corrected per frame
-    latency_frames: int = 3  # frames before a new exposure takes effect
+    sensitivity: float = _DEFAULT.sensitivity  # 1 / (radiance * s) that saturates a pixel at base ISO
+    full_well_e: float = _DEFAULT.full_well_e  # electrons at saturation, base ISO
+    read_noise_e: float = _DEFAULT.read_noise_e
+    base_iso: float = _DEFAULT.base_iso
+    iso_range: tuple[float, float] = (_DEFAULT.iso_min, _DEFAULT.iso_max)
+    exposure_range_s: tuple[float, float] = (_DEFAULT.exposure_min_s, _DEFAULT.exposure_max_s)
+    vignetting: float = _DEFAULT.vignetting  # relative fall-off at the image corners
+    target_grey: float = _DEFAULT.target_grey  # metered linear level the auto-exposure aims for
+    convergence: float = _DEFAULT.convergence  # fraction of the log error corrected per frame
+    latency_frames: int = _DEFAULT.latency_frames  # frames before a new exposure takes effect
     clipped_step: float = 4.0  # extra factor when most of a frame is clipped (its level is unknown)
-    settle_frames: int = 16  # promise: within 10 % of the target this many frames after a step
+    settle_frames: int = _DEFAULT.settle_frames  # promise: within 10 % of the target this many frames after a step
+
+    @classmethod
+    def of(cls, section: CameraSection) -> SensorSettings:
+        return cls(section.sensitivity, section.full_well_e, section.read_noise_e, section.base_iso,
+                   (section.iso_min, section.iso_max), (section.exposure_min_s, section.exposure_max_s),
+                   section.vignetting, section.target_grey, section.convergence, section.latency_frames,
+                   settle_frames=section.settle_frames)
 
     def check(self) -> None:
         if not (0 < self.iso_range[0] <= self.iso_range[1]):

@@ -8,24 +8,25 @@ random walk (density `bias_random_walk`), b_gm a first-order Gauss-Markov proces
 with correlation time `bias_correlation_s`, the usual model of the Allan-deviation floor) and w white
 noise of density `noise_density` (standard deviation noise_density * sqrt(rate)).
 
-Defaults: the noise densities and ranges of the TDK InvenSense ICM-42688-P (datasheet DS-000347:
-gyroscope 2.8 mdps/sqrt(Hz), accelerometer 70 µg/sqrt(Hz), ±2000 dps, ±16 g) and of the AKM AK09918
-magnetometer (0.15 µT per LSB, ±4900 µT); biases, random walks, scale factors and misalignments are not
-in those datasheets and are typical phone-grade values (stated beside each).
+Defaults (in the scenario schema, arsim/scenario/sections.py): the noise densities and ranges of the TDK
+InvenSense ICM-42688-P (datasheet DS-000347: gyroscope 2.8 mdps/sqrt(Hz), accelerometer 70 µg/sqrt(Hz),
+±2000 dps, ±16 g, 19/18-bit FIFO data) and of the AKM AK09918 magnetometer (0.15 µT per LSB, ±4900 µT);
+biases, random walks, scale factors and misalignments are not in those datasheets and are typical
+residuals after a phone's own calibration.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.signal import lfilter
 
 from arsim.core.errors import ArsimError
+from arsim.scenario.sections import AccelerometerSection, GyroscopeSection, MagnetometerSection
 from arsim.sensors.trajectory import Trajectory
 
 DEG = np.pi / 180.0
-G = 9.80665
 
 # The Earth's field in world axes (+y up, north along -z): 48 µT, inclined 60 degrees downwards.
 EARTH_FIELD_UT = 48.0 * np.array([0.0, -np.sin(60 * DEG), -np.cos(60 * DEG)])
@@ -56,42 +57,15 @@ class SensorModel:
                 raise ArsimError(f"{name}: {key} = {getattr(self, key)} is negative; noise terms are 0 or more")
 
 
-GYROSCOPE = SensorModel(
-    rate_hz=200.0,
-    noise_density=2.8e-3 * DEG,  # ICM-42688-P: 2.8 mdps/sqrt(Hz)
-    bias_random_walk=2e-5,  # rad/s/sqrt(s), typical phone gyroscope
-    bias_instability=5e-5,  # rad/s (about 10 deg/h), typical
-    bias_correlation_s=100.0,
-    turn_on_bias=0.05 * DEG,  # residual zero-rate offset after the phone's own online calibration
-    scale_factor=0.005,
-    misalignment_rad=0.005,  # about 0.3 degrees
-    full_scale=2000 * DEG,
-    resolution=4000 * DEG / 2**19,  # 19-bit FIFO data (20-bit format) over ±2000 dps
-    jitter_s=2e-5,
-)
-ACCELEROMETER = SensorModel(
-    rate_hz=200.0,
-    noise_density=70e-6 * G,  # ICM-42688-P: 70 µg/sqrt(Hz)
-    bias_random_walk=1e-4,  # m/s²/sqrt(s), typical
-    bias_instability=2e-3,
-    bias_correlation_s=200.0,
-    turn_on_bias=0.02 * G,  # ±20 mg class of offset
-    scale_factor=0.005,
-    misalignment_rad=0.01,
-    full_scale=16 * G,
-    resolution=32 * G / 2**18,  # 18-bit FIFO data over ±16 g
-    jitter_s=2e-5,
-)
-MAGNETOMETER = SensorModel(
-    rate_hz=50.0,
-    noise_density=0.1,  # µT/sqrt(Hz): about 0.7 µT standard deviation at 50 Hz
-    turn_on_bias=0.5,  # residual hard-iron offset after the phone's calibration, µT
-    scale_factor=0.01,  # soft iron
-    misalignment_rad=0.01,
-    full_scale=4900.0,  # AK09918
-    resolution=0.15,  # AK09918: 0.15 µT/LSB
-    jitter_s=1e-4,
-)
+def sensor_model(section) -> SensorModel:
+    """The error model of a [device.gyroscope|accelerometer|magnetometer] section."""
+    return SensorModel(**{f.name: getattr(section, f.name) for f in fields(SensorModel)})
+
+
+# The defaults live in the scenario schema (arsim/scenario/sections.py), the one place users see them.
+GYROSCOPE = sensor_model(GyroscopeSection())
+ACCELEROMETER = sensor_model(AccelerometerSection())
+MAGNETOMETER = sensor_model(MagnetometerSection())
 
 
 @dataclass(frozen=True)
