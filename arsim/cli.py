@@ -19,6 +19,7 @@ from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_com
 from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
+from arsim.sensors.recording import load_recording, record
 
 MAX_SIZE = 16384
 
@@ -59,6 +60,8 @@ def _fmt(v: float | None) -> str:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
+    if args.file.is_dir():
+        return _recording_info(args)
     stats = image_stats(read_hdr(args.file))
     if args.json:
         print(json.dumps({"file": str(args.file), **stats}, indent=2))
@@ -74,6 +77,43 @@ def cmd_info(args: argparse.Namespace) -> int:
     ]
     for key, value in rows:
         print(f"{key:<12} {value}")
+    return 0
+
+
+def _recording_info(args: argparse.Namespace) -> int:
+    rec = load_recording(args.file)
+    summary = {
+        "recording": str(args.file),
+        "format": rec.meta["format"],
+        "seed": rec.meta["seed"],
+        "duration_s": rec.meta["duration_s"],
+        "frames": len(rec.frames),
+        "camera": rec.meta["camera"],
+        "imu_samples": {name: len(stream.t_ns) for name, stream in rec.imu.items()},
+        "fusion": rec.meta["fusion"],
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    cam = summary["camera"]
+    print(f"{'recording':<12} {args.file} ({summary['format']}, seed {summary['seed']})")
+    print(f"{'duration':<12} {summary['duration_s']:.1f} s, {summary['frames']} frames of {cam['width']} x {cam['height']} at {cam['fps']:g} fps")
+    print(f"{'IMU':<12} " + ", ".join(f"{name} {n}" for name, n in summary["imu_samples"].items()) + " samples")
+    print(f"{'fusion':<12} {summary['fusion']}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
+# arsim record
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    scenario = load_scenario(args.scenario)
+    out = _output_dir(args.output)
+    with progress_bar("recording the capture sweep", 1.0) as update:
+        summary = record(scenario, out, progress=lambda f: update(completed=f))
+    print(f"wrote {summary.frames} frames and the IMU streams of a {summary.duration_s:.0f} s sweep to {out}; "
+          f"fused yaw error at the end {summary.final_yaw_error_deg:+.2f} degrees")
     return 0
 
 
@@ -220,9 +260,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"arsim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
-    p = _command(sub, "info", "print size, layout, radiance range and bad-texel counts of an HDR image",
-                 "arsim info assets/envmaps/sunrise.exr")
-    p.add_argument("file", type=Path, metavar="FILE", help="OpenEXR (.exr) or Radiance (.hdr) image")
+    p = _command(sub, "info", "print size, layout, radiance range and bad-texel counts of an HDR image, "
+                 "or check a recording and summarise it", "arsim info assets/envmaps/sunrise.exr")
+    p.add_argument("file", type=Path, metavar="FILE", help="OpenEXR (.exr) or Radiance (.hdr) image, or a recording folder")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(run=cmd_info)
 
@@ -270,6 +310,12 @@ def build_parser() -> argparse.ArgumentParser:
                    default=list(DEFAULT_SH_ORDERS), metavar="O,O,...",
                    help="orders of the SH error-against-order study (default " + ",".join(map(str, DEFAULT_SH_ORDERS)) + "; empty to skip)")
     p.set_defaults(run=cmd_compare_methods)
+
+    p = _command(sub, "record", "synthesise the capture sweep of a scenario: frames, IMU streams, fused orientation, truth",
+                 "arsim record scenarios/indoor.toml -o rec")
+    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help="scenario .toml (default: the embedded default scenario)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="recording folder (created if missing)")
+    p.set_defaults(run=cmd_record)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")

@@ -137,12 +137,12 @@ def _allowed(meta: dict) -> str:
     return f"at most {hi}{unit}"
 
 
-def _check_value(name: str, value: Any, meta: dict, where: str) -> None:
+def _check_value(name: str, value: Any, meta: dict, where: str, written: Any) -> None:
     numbers = value if isinstance(value, tuple) else (value,)
     for v in numbers:
         if isinstance(v, (int, float)) and not isinstance(v, bool):
             if (meta["min"] is not None and v < meta["min"]) or (meta["max"] is not None and v > meta["max"]):
-                raise ScenarioError(f"{where} {name} = {_describe(value)} is out of range: allowed {_allowed(meta)}")
+                raise ScenarioError(f"{where} {name} = {_describe(written)} is out of range: allowed {_allowed(meta)}")
     if meta["choices"] is not None and value not in meta["choices"]:
         options = ", ".join(_describe(c) for c in meta["choices"])
         hint = difflib.get_close_matches(str(value), [str(c) for c in meta["choices"]], n=1)
@@ -198,7 +198,7 @@ def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, pa
             value = _coerce(tp, raw)
         except TypeError:
             raise ScenarioError(f"{where} {name} = {_describe(raw)} has the wrong type: expected {_type_name(tp)}") from None
-        _check_value(name, value, f.metadata, where)
+        _check_value(name, value, f.metadata, where, raw)
         if tp is Path or Path in typing.get_args(tp):
             path, candidates = resolver.resolve(value)
             if f.metadata["must_exist"] and not path.exists():

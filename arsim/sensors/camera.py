@@ -8,6 +8,7 @@ shot noise, so high ISO costs signal-to-noise as on a real sensor.
 
 from __future__ import annotations
 
+import functools
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -44,6 +45,23 @@ class ResponseCurve:
             c = self.contrast
             y = 0.5 + 0.5 * np.tanh(c * (y - 0.5)) / np.tanh(c / 2)
         return y
+
+    @functools.cached_property
+    def _code_thresholds(self) -> np.ndarray:
+        """Relative exposures where the 8-bit code steps up: code c covers [t[c-1], t[c])."""
+        return self.inverse((np.arange(255) + 0.5) / 255.0)
+
+    @functools.cached_property
+    def _code_values(self) -> np.ndarray:
+        return self.inverse(np.arange(256) / 255.0)
+
+    def encode(self, x: np.ndarray) -> np.ndarray:
+        """8-bit codes round(255 apply(x)), found by thresholds instead of evaluating the curve per pixel."""
+        return np.searchsorted(self._code_thresholds, x, side="right").astype(np.uint8)
+
+    def decode(self, codes: np.ndarray) -> np.ndarray:
+        """Relative exposure of 8-bit codes (a 256-entry table of the inverse curve)."""
+        return self._code_values[codes]
 
     def inverse(self, y: np.ndarray) -> np.ndarray:
         y = np.clip(np.asarray(y, dtype=np.float64), 0.0, 1.0)
@@ -105,16 +123,19 @@ def expose(radiance: np.ndarray, exposure_s: float, iso: float, sensor: SensorSe
     """An 8-bit RGB frame (H, W, 3) of the scene radiance: photons to electrons with shot and read
     noise, analog gain, clipping, the response curve, and quantisation."""
     falloff = vignette(*radiance.shape[:2], sensor.vignetting) if falloff is None else falloff
-    relative = radiance * (exposure_s * sensor.sensitivity) * falloff[..., None]
-    electrons = np.maximum(relative * sensor.full_well_e, 0.0)
-    electrons = electrons + rng.standard_normal(electrons.shape) * np.sqrt(electrons + sensor.read_noise_e**2)
-    signal = electrons / sensor.full_well_e * (iso / sensor.base_iso)
-    return np.round(response.apply(signal) * 255.0).astype(np.uint8)
+    # float32 throughout: the result is 8 bits, and a 640 x 480 frame is 0.9 M samples per channel.
+    scale = np.float32(exposure_s * sensor.sensitivity * sensor.full_well_e)
+    electrons = np.maximum(radiance.astype(np.float32) * scale * falloff[..., None].astype(np.float32), 0.0)
+    noise = rng.standard_normal(electrons.shape, dtype=np.float32)
+    electrons += noise * np.sqrt(electrons + np.float32(sensor.read_noise_e**2))
+    signal = electrons * np.float32(iso / sensor.base_iso / sensor.full_well_e)
+    return response.encode(signal)
 
 
 def metered_level(frame: np.ndarray, response: ResponseCurve) -> float:
-    """Centre-weighted mean linear luminance of an 8-bit frame (what the auto-exposure measures)."""
-    linear = response.inverse(frame.astype(np.float64) / 255.0) @ LUMA
+    """Centre-weighted mean linear luminance of an 8-bit frame (what the auto-exposure measures), from
+    every fourth pixel in each direction as camera pipelines meter on low-resolution statistics."""
+    linear = response.decode(frame[::4, ::4]) @ LUMA
     h, w = linear.shape
     y, x = np.mgrid[0:h, 0:w]
     weight = np.exp(-(((x - w / 2) / (0.35 * w)) ** 2 + ((y - h / 2) / (0.35 * h)) ** 2))

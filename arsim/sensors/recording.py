@@ -1,0 +1,235 @@
+"""Recordings: what a phone would have logged during the capture sweep, written for replay and for
+other tools to read, and read back with checks that explain what is wrong.
+
+A recording folder holds:
+  meta.json          format version, seed, camera intrinsics, device-to-camera rotation, the scenario
+  frames/NNNNNN.png  8-bit RGB frames;  frames.csv: t_ns, exposure_ns, iso, file
+  imu.csv            t_ns, sensor, x, y, z   (gyroscope rad/s, accelerometer m/s², magnetometer µT)
+  orientation.csv    t_ns, qx, qy, qz, qw    (the fused device-to-world orientation the app reads)
+  groundtruth.csv    t_ns, px, py, pz, qx, qy, qz, qw  (true device pose at every gyroscope sample)
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from arsim import __version__
+from arsim.core.conventions import CameraIntrinsics
+from arsim.core.errors import ArsimError
+from arsim.core.files import atomic_path, write_text_atomic
+from arsim.scenario import Scenario, scenario_to_toml
+from arsim.scenario.environment import load_environment
+from arsim.sensors.camera import AutoExposure, ResponseCurve, SensorSettings, expose, vignette
+from arsim.sensors.fusion import mahony, yaw_error_deg
+from arsim.sensors.imu import SensorStream, sensor_model, simulate_imu
+from arsim.sensors.trajectory import CAMERA_TO_DEVICE, CaptureSweep
+from arsim.sensors.views import EnvironmentRenderer
+
+FORMAT = "arsim-recording/1"
+SENSORS = ("gyroscope", "accelerometer", "magnetometer")
+
+
+def capture_sweep(scenario: Scenario) -> CaptureSweep:
+    c = scenario.capture
+    return CaptureSweep(c.duration_s, c.turns, c.pitch_from_deg, c.pitch_to_deg, c.roll_wobble_deg, c.sway_m)
+
+
+def camera_intrinsics(scenario: Scenario) -> CameraIntrinsics:
+    cam = scenario.device.camera
+    return CameraIntrinsics.from_fov(cam.width, cam.height, cam.hfov_deg)
+
+
+def _csv(header: list[str], rows) -> str:
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows)
+    return out.getvalue()
+
+
+def _png_bytes(frame: np.ndarray) -> bytes:
+    ok, data = cv2.imencode(".png", np.ascontiguousarray(frame[..., ::-1]), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    if not ok:
+        raise ArsimError("a frame could not be encoded as PNG")
+    return data.tobytes()
+
+
+def _write_png(path: Path, frame: np.ndarray) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(_png_bytes(frame))
+
+
+@dataclass(frozen=True)
+class RecordSummary:
+    frames: int
+    duration_s: float
+    final_yaw_error_deg: float
+
+
+def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] = lambda f: None) -> RecordSummary:
+    """Synthesise the capture sweep of a scenario into out_dir (created if missing). Deterministic:
+    the same scenario and seed give byte-identical files."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "frames").mkdir(exist_ok=True)
+    seed = scenario.run.seed
+    sweep = capture_sweep(scenario)
+    camera = camera_intrinsics(scenario)
+    cam = scenario.device.camera
+    # Independent streams per purpose, so adding frames does not change the IMU and vice versa.
+    rng_imu, rng_frames = (np.random.default_rng([seed, k]) for k in (1, 2))
+    device = scenario.device
+    streams = simulate_imu(sweep, rng_imu, sensor_model(device.gyroscope), sensor_model(device.accelerometer),
+                           sensor_model(device.magnetometer))
+    t_fused, fused = mahony(streams, sweep.orientation([0.0])[0], scenario.capture.fusion)
+    truth = sweep.orientation(t_fused / 1e9)
+
+    probe = load_environment(scenario.environment)
+    renderer = EnvironmentRenderer(probe, camera)
+    sensor = SensorSettings.of(cam)
+    response = ResponseCurve(cam.response, cam.gamma, cam.contrast)
+    ae = AutoExposure(sensor, response)
+    falloff = vignette(cam.height, cam.width, sensor.vignetting)
+    n_frames = int(math.floor(sweep.duration * cam.fps)) + 1
+    rows = []
+    with ThreadPoolExecutor(2) as writers:  # PNG encoding releases the GIL: overlap it with rendering
+        pending = []
+        for k in range(n_frames):
+            t = k / cam.fps
+            used = ae.next_frame_settings()
+            radiance = renderer.render(sweep.camera_orientation([t])[0])
+            frame = expose(radiance, *used, sensor, response, rng_frames, falloff)
+            ae.update(frame, used)
+            name = f"{k:06d}.png"
+            pending.append(writers.submit(_write_png, out_dir / "frames" / name, frame))
+            rows.append((int(round(t * 1e9)), int(round(used[0] * 1e9)), round(used[1], 3), f"frames/{name}"))
+            progress((k + 1) / n_frames)
+        for future in pending:
+            future.result()
+    renderer.release()
+
+    write_text_atomic(out_dir / "frames.csv", _csv(["t_ns", "exposure_ns", "iso", "file"], rows))
+    imu_rows = sorted(((int(t), name, *np.round(v, 9)) for name in SENSORS
+                       for t, v in zip(streams[name].t_ns, streams[name].values)), key=lambda r: (r[0], r[1]))
+    write_text_atomic(out_dir / "imu.csv", _csv(["t_ns", "sensor", "x", "y", "z"], imu_rows))
+    write_text_atomic(out_dir / "orientation.csv", _csv(["t_ns", "qx", "qy", "qz", "qw"],
+                      ((int(t), *np.round(q, 9)) for t, q in zip(t_fused, fused.as_quat()))))
+    positions = sweep.position(t_fused / 1e9)
+    write_text_atomic(out_dir / "groundtruth.csv", _csv(["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"],
+                      ((int(t), *np.round(p, 9), *np.round(q, 9)) for t, p, q in zip(t_fused, positions, truth.as_quat()))))
+    meta = {
+        "format": FORMAT,
+        "arsim_version": __version__,
+        "seed": seed,
+        "duration_s": sweep.duration,
+        "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy,
+                   "cx": camera.cx, "cy": camera.cy, "fps": cam.fps},
+        "camera_to_device": CAMERA_TO_DEVICE.tolist(),
+        "fusion": scenario.capture.fusion,
+        "scenario_toml": scenario_to_toml(scenario),
+    }
+    write_text_atomic(out_dir / "meta.json", json.dumps(meta, indent=2) + "\n")
+    return RecordSummary(n_frames, sweep.duration, float(yaw_error_deg(fused[-1:], truth[-1:])[0]))
+
+
+# ----------------------------------------------------------------------------------------------------
+# Reading a recording back
+
+
+@dataclass(frozen=True)
+class Recording:
+    folder: Path
+    meta: dict
+    frames: list[dict]  # t_ns, exposure_ns, iso, file
+    imu: dict[str, SensorStream]
+    orientation: tuple[np.ndarray, Rotation]
+    groundtruth: tuple[np.ndarray, np.ndarray, Rotation]
+
+
+def _read_csv(path: Path, header: list[str]) -> list[list[str]]:
+    if not path.exists():
+        raise ArsimError(f"{path}: missing from the recording; record it again")
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or rows[0] != header:
+        raise ArsimError(f"{path}: header is {rows[0] if rows else 'missing'}, expected {','.join(header)}")
+    return rows[1:]
+
+
+def _numbers(path: Path, rows: list[list[str]], columns: slice) -> np.ndarray:
+    try:
+        values = np.array([[float(v) for v in row[columns]] for row in rows], dtype=np.float64)
+    except ValueError as exc:
+        raise ArsimError(f"{path}: a value is not a number ({exc})") from None
+    if values.size and not np.isfinite(values).all():
+        bad = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0]) + 2
+        raise ArsimError(f"{path}: line {bad} has a NaN or infinite value")
+    return values
+
+
+def _increasing(path: Path, t_ns: np.ndarray, what: str) -> None:
+    back = np.flatnonzero(np.diff(t_ns) <= 0)
+    if back.size:
+        k = int(back[0])
+        raise ArsimError(f"{path}: timestamps of the {what} go backwards after entry {k + 1} "
+                         f"({int(t_ns[k])} then {int(t_ns[k + 1])} ns); fix or drop that entry")
+
+
+def load_recording(folder: Path) -> Recording:
+    """Read and check a recording; every problem is one ArsimError naming the file and what to fix."""
+    folder = Path(folder)
+    if not (folder / "meta.json").exists():
+        raise ArsimError(f"{folder}: not a recording (no meta.json); give a folder written by arsim record")
+    try:
+        meta = json.loads((folder / "meta.json").read_text())
+    except json.JSONDecodeError as exc:
+        raise ArsimError(f"{folder / 'meta.json'}: is not valid JSON ({exc})") from None
+    if meta.get("format") != FORMAT:
+        raise ArsimError(f"{folder / 'meta.json'}: format {meta.get('format')!r} is not known; this arsim reads {FORMAT}")
+
+    path = folder / "frames.csv"
+    rows = _read_csv(path, ["t_ns", "exposure_ns", "iso", "file"])
+    numbers = _numbers(path, rows, slice(0, 3))
+    t_frames = numbers[:, 0].astype(np.int64) if len(rows) else np.zeros(0, np.int64)
+    _increasing(path, t_frames, "frames")
+    listed = [row[3] for row in rows]
+    missing = [name for name in listed if not (folder / name).exists()]
+    if missing:
+        raise ArsimError(f"{path}: {len(missing)} listed frames are missing, first {missing[0]}; record again or drop them from frames.csv")
+    extra = sorted({f"frames/{p.name}" for p in (folder / "frames").glob("*.png")} - set(listed))
+    if extra:
+        raise ArsimError(f"{folder / 'frames'}: {len(extra)} frames are not in frames.csv, first {extra[0]}; remove them or list them")
+    frames = [{"t_ns": int(n[0]), "exposure_ns": int(n[1]), "iso": float(n[2]), "file": f} for n, f in zip(numbers, listed)]
+
+    path = folder / "imu.csv"
+    rows = _read_csv(path, ["t_ns", "sensor", "x", "y", "z"])
+    unknown = sorted({row[1] for row in rows} - set(SENSORS))
+    if unknown:
+        raise ArsimError(f"{path}: unknown sensor {unknown[0]!r}; expected {', '.join(SENSORS)}")
+    imu = {}
+    for name in SENSORS:
+        mine = [row for row in rows if row[1] == name]
+        values = _numbers(path, [[row[0], *row[2:]] for row in mine], slice(0, 4))
+        t_ns = values[:, 0].astype(np.int64) if len(mine) else np.zeros(0, np.int64)
+        _increasing(path, t_ns, name)
+        imu[name] = SensorStream(name, t_ns, values[:, 1:] if len(mine) else np.zeros((0, 3)))
+
+    path = folder / "orientation.csv"
+    values = _numbers(path, _read_csv(path, ["t_ns", "qx", "qy", "qz", "qw"]), slice(0, 5))
+    _increasing(path, values[:, 0].astype(np.int64), "orientations")
+    orientation = (values[:, 0].astype(np.int64), Rotation.from_quat(values[:, 1:]))
+    path = folder / "groundtruth.csv"
+    values = _numbers(path, _read_csv(path, ["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"]), slice(0, 8))
+    _increasing(path, values[:, 0].astype(np.int64), "ground-truth poses")
+    groundtruth = (values[:, 0].astype(np.int64), values[:, 1:4], Rotation.from_quat(values[:, 4:]))
+    return Recording(folder, meta, frames, imu, orientation, groundtruth)
