@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from arsim.core.conventions import CameraIntrinsics
 from arsim.sensors.trajectory import Trajectory
@@ -17,11 +18,10 @@ def fibonacci_directions(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
-def seen_directions(trajectory: Trajectory, camera: CameraIntrinsics, fps: float, directions: np.ndarray) -> np.ndarray:
-    """For each direction (K, 3), whether any frame of the trajectory (at fps) has it in its image."""
-    times = np.arange(0.0, trajectory.duration, 1.0 / fps)
+def seen_by_views(camera_to_world: Rotation, camera: CameraIntrinsics, directions: np.ndarray) -> np.ndarray:
+    """For each direction (K, 3), whether any of the camera orientations has it in its image."""
     seen = np.zeros(len(directions), dtype=bool)
-    for rotation in trajectory.camera_orientation(times):
+    for rotation in camera_to_world:
         cam = rotation.inv().apply(directions)
         ahead = cam[:, 2] > 1e-9
         px = camera.project(np.where(ahead[:, None], cam, 1.0))
@@ -29,6 +29,11 @@ def seen_directions(trajectory: Trajectory, camera: CameraIntrinsics, fps: float
             & (px[:, 1] >= -0.5) & (px[:, 1] <= camera.height - 0.5)
         seen |= inside
     return seen
+
+
+def seen_directions(trajectory: Trajectory, camera: CameraIntrinsics, fps: float, directions: np.ndarray) -> np.ndarray:
+    """For each direction (K, 3), whether any frame of the trajectory (at fps) has it in its image."""
+    return seen_by_views(trajectory.camera_orientation(np.arange(0.0, trajectory.duration, 1.0 / fps)), camera, directions)
 
 
 def sphere_coverage(trajectory: Trajectory, camera: CameraIntrinsics, fps: float, samples: int = 20000) -> float:

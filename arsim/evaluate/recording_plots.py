@@ -1,0 +1,129 @@
+"""Plots of a recording: where the camera looked (coverage), exposure and ISO, the IMU signals, and the
+fused orientation's error against the truth. Drawn from the files, so they show what was written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from arsim.core.conventions import CameraIntrinsics
+from arsim.core.files import atomic_path
+from arsim.sensors.coverage import fibonacci_directions, seen_by_views
+from arsim.sensors.fusion import tilt_error_deg, yaw_error_deg
+from arsim.sensors.recording import Recording
+from arsim.sensors.trajectory import CAMERA_TO_DEVICE
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: Path) -> Path:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, bbox_inches="tight")
+    _pyplot().close(fig)
+    return path
+
+
+def _lon_lat(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Longitude (as the equirect's phi, degrees, 180 = +z) and latitude (degrees) of directions."""
+    lon = np.degrees(np.mod(np.arctan2(d[:, 0], -d[:, 2]), 2 * np.pi))
+    return lon, np.degrees(np.arcsin(np.clip(d[:, 1], -1, 1)))
+
+
+def frame_camera_orientations(rec: Recording) -> Rotation:
+    """True camera-to-world rotations at the frame times (nearest ground-truth sample)."""
+    t_truth, _, truth = rec.groundtruth
+    t_frames = np.array([f["t_ns"] for f in rec.frames])
+    nearest = np.clip(np.searchsorted(t_truth, t_frames), 0, len(t_truth) - 1)
+    return truth[nearest] * Rotation.from_matrix(CAMERA_TO_DEVICE)
+
+
+def plot_coverage(rec: Recording, path: Path, samples: int = 20000) -> tuple[Path, float]:
+    cam = rec.meta["camera"]
+    camera = CameraIntrinsics(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"])
+    rotations = frame_camera_orientations(rec)
+    directions = fibonacci_directions(samples)
+    seen = seen_by_views(rotations, camera, directions)
+    coverage = float(seen.mean())
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    lon, lat = _lon_lat(directions[~seen])
+    ax.scatter(lon, lat, s=2, color="crimson", label="never seen")
+    forward = rotations.apply([0.0, 0.0, 1.0])
+    lon, lat = _lon_lat(forward)
+    t = np.array([f["t_ns"] for f in rec.frames]) / 1e9
+    path_plot = ax.scatter(lon, lat, c=t, s=4, cmap="viridis", label="camera axis")
+    fig.colorbar(path_plot, ax=ax, label="time (s)")
+    ax.set_xlim(0, 360)
+    ax.set_ylim(-90, 90)
+    ax.set_xlabel("longitude (degrees, 180 = +z)")
+    ax.set_ylabel("latitude (degrees)")
+    ax.set_title(f"Capture sweep: the camera's path; {100 * coverage:.2f} % of the sphere seen")
+    ax.legend(loc="lower left", fontsize=8)
+    return _save(fig, path), coverage
+
+
+def plot_exposure(rec: Recording, path: Path) -> Path:
+    plt = _pyplot()
+    t = np.array([f["t_ns"] for f in rec.frames]) / 1e9
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    ax.plot(t, [f["exposure_ns"] / 1e6 for f in rec.frames], color="tab:blue")
+    ax.set_yscale("log")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("exposure (ms)", color="tab:blue")
+    other = ax.twinx()
+    other.plot(t, [f["iso"] for f in rec.frames], color="tab:orange")
+    other.set_ylabel("ISO", color="tab:orange")
+    ax.set_title("Auto-exposure: exposure time and ISO per frame")
+    return _save(fig, path)
+
+
+def plot_imu(rec: Recording, path: Path) -> Path:
+    plt = _pyplot()
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    units = {"gyroscope": "rad/s", "accelerometer": "m/s²", "magnetometer": "µT"}
+    for ax, (name, stream) in zip(axes, rec.imu.items()):
+        t = stream.t_ns / 1e9
+        for k, axis in enumerate("xyz"):
+            ax.plot(t, stream.values[:, k], lw=0.6, label=axis)
+        ax.set_ylabel(f"{name}\n({units[name]})")
+        ax.legend(loc="upper right", fontsize=7, ncol=3)
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle("IMU streams in device axes")
+    return _save(fig, path)
+
+
+def plot_orientation_error(rec: Recording, path: Path) -> tuple[Path, float]:
+    plt = _pyplot()
+    t_ns, fused = rec.orientation
+    _, _, truth = rec.groundtruth
+    yaw, tilt = yaw_error_deg(fused, truth), tilt_error_deg(fused, truth)
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    ax.plot(t_ns / 1e9, yaw, label="yaw (heading)")
+    ax.plot(t_ns / 1e9, tilt, label="tilt (pitch and roll)")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("error (degrees)")
+    ax.set_title(f"Fused orientation ({rec.meta['fusion']}) against the truth: yaw {yaw[-1]:+.2f} degrees at the end")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    return _save(fig, path), float(yaw[-1])
+
+
+def plot_recording(rec: Recording, out_dir: Path) -> dict:
+    """All four plots into out_dir; returns their paths and the figures they show."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    coverage_path, coverage = plot_coverage(rec, out_dir / "coverage.png")
+    error_path, final_yaw = plot_orientation_error(rec, out_dir / "orientation_error.png")
+    return {
+        "files": [coverage_path, plot_exposure(rec, out_dir / "exposure.png"), plot_imu(rec, out_dir / "imu.png"), error_path],
+        "coverage": coverage,
+        "final_yaw_error_deg": final_yaw,
+    }
