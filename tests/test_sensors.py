@@ -105,3 +105,25 @@ def test_game_rotation_vector_drifts_in_yaw_and_rotation_vector_does_not():
     # Gravity holds pitch and roll, up to the accelerometer's own errors: 20 mg turn-on bias per axis
     # (up to 1.6 degrees), 0.6-degree misalignments, and the gyroscope bias over kp (0.3 degrees).
     assert game_tilt < 4.5 and mag_tilt < 4.5
+
+
+def test_ar_path_circles_the_marker_and_loses_it_only_when_looking_away():
+    from arsim.sensors.trajectory import ARPath
+
+    path = ARPath()
+    t = np.arange(0.0, path.duration, 1 / 30)
+    h = 1e-5
+    numeric = (path.orientation(t[::50] - h).inv() * path.orientation(t[::50] + h)).as_rotvec() / (2 * h)
+    np.testing.assert_allclose(path.angular_velocity(t[::50]), numeric, atol=1e-7)
+    position = path.position(t)
+    distance = np.linalg.norm(position, axis=1)
+    assert distance.min() == pytest.approx(0.3, abs=1e-6) and distance.max() == pytest.approx(1.5, abs=1e-3)
+    assert position[:, 1].min() > 0.1  # above the table
+    camera = CameraIntrinsics.from_fov(640, 480, 60.0)
+    local = path.camera_orientation(t).inv().apply(-position)  # the marker in camera axes
+    px = camera.project(local)
+    visible = (local[:, 2] > 0) & (px[:, 0] >= 0) & (px[:, 0] < 640) & (px[:, 1] >= 0) & (px[:, 1] < 480)
+    (start, end), = path.look_away
+    away = (t > start) & (t < end)
+    assert visible[~away].all()
+    assert not visible[(t > start + 1) & (t < end - 1)].any()

@@ -131,3 +131,64 @@ class Static(Trajectory):
 
     def position(self, t: np.ndarray) -> np.ndarray:
         return np.zeros(np.shape(np.atleast_1d(t)) + (3,))
+
+
+@dataclass(frozen=True)
+class ARPath(Trajectory):
+    """Walking around the marker (at the origin, on the table y = 0) while looking at it: the phone
+    circles `laps` times at a distance swinging between `near_m` and `far_m`, seen from 27 to 43
+    degrees above the table, with a hand shake of about `shake_deg`. In each `look_away` window
+    (start, end in seconds) the view swings 70 degrees off the marker and back: the tag is lost."""
+
+    duration: float = 30.0
+    laps: float = 1.0
+    near_m: float = 0.3
+    far_m: float = 1.5
+    shake_deg: float = 0.5
+    look_away: tuple[tuple[float, float], ...] = ((12.0, 15.0),)
+
+    def position(self, t: np.ndarray) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        u, _, _ = _smoothstep(t / self.duration)
+        azimuth = 2 * np.pi * self.laps * u
+        mid, amp = (self.far_m + self.near_m) / 2, (self.far_m - self.near_m) / 2
+        radius = mid - amp * np.cos(2 * np.pi * t / self.duration * 1.5)  # near, far and near again
+        elevation = np.deg2rad(35.0 + 8.0 * np.sin(2 * np.pi * t / 7.0))
+        ground = radius * np.cos(elevation)
+        return np.stack([ground * np.sin(azimuth), radius * np.sin(elevation), ground * np.cos(azimuth)], axis=-1)
+
+    def _away(self, t: np.ndarray) -> np.ndarray:
+        """0 while looking at the marker, rising smoothly to 1 inside each look-away window."""
+        out = np.zeros_like(t)
+        for start, end in self.look_away:
+            ramp = min(1.0, (end - start) / 3)
+            up, _, _ = _smoothstep((t - start) / ramp)
+            down, _, _ = _smoothstep((end - t) / ramp)
+            out = np.maximum(out, np.minimum(up, down))
+        return out
+
+    def _look_angles(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Yaw, pitch and roll (rad) of the look direction at times t (K,)."""
+        forward = -self.position(t)  # towards the marker
+        forward /= np.linalg.norm(forward, axis=-1, keepdims=True)
+        yaw = np.arctan2(-forward[:, 0], -forward[:, 2])
+        pitch = np.arcsin(np.clip(forward[:, 1], -1, 1))
+        yaw = yaw + np.deg2rad(70.0) * self._away(t)
+        shake = np.deg2rad(self.shake_deg)
+        yaw = yaw + shake * (0.6 * np.sin(2 * np.pi * 2.3 * t) + 0.4 * np.sin(2 * np.pi * 4.1 * t + 1.0))
+        pitch = pitch + shake * (0.6 * np.sin(2 * np.pi * 3.1 * t + 2.0) + 0.4 * np.sin(2 * np.pi * 5.3 * t))
+        roll = shake * np.sin(2 * np.pi * 1.7 * t + 0.5)
+        return yaw, pitch, roll
+
+    def angles(self, t: np.ndarray) -> Angles:
+        # The look-at angles have no convenient closed-form derivative: a fourth-order central difference
+        # of these smooth functions is accurate to about 1e-9 rad/s, far below any gyroscope's noise.
+        h = 1e-4
+        samples = [self._look_angles(t + k * h) for k in (-2, -1, 0, 1, 2)]
+
+        def derivative(i: int) -> np.ndarray:
+            v = [np.unwrap(np.stack([s[i] for s in samples]), axis=0)[k] for k in range(5)]
+            return (v[0] - 8 * v[1] + 8 * v[3] - v[4]) / (12 * h)
+
+        yaw, pitch, roll = samples[2]
+        return Angles(yaw, pitch, roll, derivative(0), derivative(1), derivative(2))
