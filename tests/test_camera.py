@@ -86,3 +86,11 @@ def test_bad_sensor_settings_are_refused():
         AutoExposure(SensorSettings(iso_range=(200.0, 100.0)), ResponseCurve())
     with pytest.raises(ArsimError):
         AutoExposure(SensorSettings(convergence=0.0), ResponseCurve())
+
+
+@pytest.mark.parametrize("kind, gamma", [("srgb", 2.2), ("gamma", 2.2), ("gamma", 4.0), ("s-curve", 2.2)])
+def test_8_bit_encoding_equals_rounding_the_curve(kind, gamma):
+    curve = ResponseCurve(kind, gamma=gamma)
+    rng = np.random.default_rng(7)
+    x = np.concatenate([rng.random(200000) * 1.2, rng.random(50000) * 1e-3, [-1.0, 0.0, 1.0, 2.0]])
+    np.testing.assert_array_equal(curve.encode(x), np.round(curve.apply(x) * 255).astype(np.uint8))

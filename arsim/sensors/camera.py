@@ -55,9 +55,27 @@ class ResponseCurve:
     def _code_values(self) -> np.ndarray:
         return self.inverse(np.arange(256) / 255.0)
 
+    @functools.cached_property
+    def _code_table(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per bin of 2^20 over [0, 1]: the code at the bin's lower edge. Exact when no bin holds two
+        code steps (then one comparison finishes the job); None where the curve is too steep for that."""
+        bins = 1 << 20
+        edges = np.arange(bins + 1) / bins
+        codes = np.searchsorted(self._code_thresholds, edges, side="right")
+        if np.max(np.diff(codes)) > 1:
+            return None
+        return codes[:-1].astype(np.int32), np.append(self._code_thresholds, np.inf)
+
     def encode(self, x: np.ndarray) -> np.ndarray:
-        """8-bit codes round(255 apply(x)), found by thresholds instead of evaluating the curve per pixel."""
-        return np.searchsorted(self._code_thresholds, x, side="right").astype(np.uint8)
+        """8-bit codes round(255 apply(x)), by table lookup instead of evaluating the curve per pixel."""
+        table = self._code_table
+        if table is None:
+            return np.searchsorted(self._code_thresholds, x, side="right").astype(np.uint8)
+        low, thresholds = table
+        x = np.clip(x, 0.0, 1.0)
+        codes = low[np.minimum((x * len(low)).astype(np.int32), len(low) - 1)]
+        codes += x >= thresholds[codes]
+        return codes.astype(np.uint8)
 
     def decode(self, codes: np.ndarray) -> np.ndarray:
         """Relative exposure of 8-bit codes (a 256-entry table of the inverse curve)."""

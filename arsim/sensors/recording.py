@@ -59,7 +59,9 @@ def _csv(header: list[str], rows) -> str:
 
 
 def _png_bytes(frame: np.ndarray) -> bytes:
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(frame[..., ::-1]), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    # Fast zlib level and run-length strategy: noisy camera frames gain little from harder compression.
+    ok, data = cv2.imencode(".png", np.ascontiguousarray(frame[..., ::-1]),
+                            [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE])
     if not ok:
         raise ArsimError("a frame could not be encoded as PNG")
     return data.tobytes()
