@@ -197,3 +197,14 @@ def test_gl_projection_puts_points_where_opencv_does():
 def test_opencv_to_opengl_flips_y_and_z():
     np.testing.assert_array_equal(OPENCV_TO_OPENGL @ [0, 0, 1], [0, 0, -1])  # forward is -z in GL
     np.testing.assert_array_equal(OPENCV_TO_OPENGL @ [0, 1, 0], [0, -1, 0])  # down is -y in GL
+
+
+def test_radial_distortion_round_trips_and_matches_opencv():
+    import cv2
+
+    k = CameraIntrinsics.from_fov(640, 480, 70.0, k1=-0.12, k2=0.03)
+    px = np.random.default_rng(8).uniform([0, 0], [640, 480], size=(200, 2))
+    rays = k.unproject(px)
+    np.testing.assert_allclose(k.project(rays), px, atol=1e-6)
+    projected, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), k.matrix, k.distortion)
+    np.testing.assert_allclose(projected[:, 0], k.project(rays), atol=1e-9)

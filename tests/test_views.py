@@ -45,3 +45,13 @@ def test_a_bright_direction_appears_at_its_projected_pixel():
     expected = CAMERA.project(upright.inv().apply(target)[None])[0]  # (u, v)
     assert abs(peak[1] - expected[0]) <= 2 and abs(peak[0] - expected[1]) <= 2
     assert expected[0] > CAMERA.cx and expected[1] < CAMERA.cy  # +x is right and +y is up in the picture
+
+
+def test_gl_view_with_lens_distortion_matches_the_reference(renderer_and_probe):
+    _, probe = renderer_and_probe
+    camera = CameraIntrinsics.from_fov(160, 120, 70.0, k1=-0.15, k2=0.02)
+    rotation = CaptureSweep().camera_orientation([25.0])[0]
+    gl = EnvironmentRenderer(probe, camera).render(rotation)
+    ref = environment_view_reference(probe, camera, rotation)
+    rel = np.abs(gl - ref) / (ref + 1e-3 * ref.mean())
+    assert rel.max() < 1e-2 and rel.mean() < 1e-3

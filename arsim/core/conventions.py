@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -213,7 +214,8 @@ OPENCV_TO_OPENGL = np.diag([1.0, -1.0, -1.0])
 
 @dataclass(frozen=True)
 class CameraIntrinsics:
-    """OpenCV pinhole intrinsics; pixel (0, 0) is the centre of the top-left pixel."""
+    """OpenCV pinhole intrinsics with optional radial distortion (OpenCV's k1, k2); pixel (0, 0) is the
+    centre of the top-left pixel."""
 
     width: int
     height: int
@@ -221,34 +223,50 @@ class CameraIntrinsics:
     fy: float
     cx: float
     cy: float
+    k1: float = 0.0
+    k2: float = 0.0
 
     @classmethod
-    def from_fov(cls, width: int, height: int, hfov_deg: float) -> CameraIntrinsics:
-        """Square pixels, principal point at the image centre, horizontal field of view in degrees."""
+    def from_fov(cls, width: int, height: int, hfov_deg: float, k1: float = 0.0, k2: float = 0.0) -> CameraIntrinsics:
+        """Square pixels, principal point at the image centre, horizontal field of view in degrees
+        (of the undistorted pinhole)."""
         f = 0.5 * width / np.tan(np.deg2rad(hfov_deg) / 2.0)
-        return cls(width, height, f, f, (width - 1) / 2.0, (height - 1) / 2.0)
+        return cls(width, height, f, f, (width - 1) / 2.0, (height - 1) / 2.0, k1, k2)
 
     @property
     def matrix(self) -> np.ndarray:
         """The 3 x 3 camera matrix K as cv2.solvePnP and cv2.projectPoints take it."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
+    @property
+    def distortion(self) -> np.ndarray:
+        """OpenCV distortion coefficients (k1, k2, p1, p2)."""
+        return np.array([self.k1, self.k2, 0.0, 0.0])
+
     def project(self, points_cam: np.ndarray) -> np.ndarray:
-        """Pixel coordinates (..., 2) of camera-frame points (..., 3) with z > 0."""
+        """Pixel coordinates (..., 2) of camera-frame points (..., 3) with z > 0 (distortion applied)."""
         p = np.asarray(points_cam, dtype=np.float64)
-        z = p[..., 2]
-        return np.stack([self.fx * p[..., 0] / z + self.cx, self.fy * p[..., 1] / z + self.cy], axis=-1)
+        x, y = p[..., 0] / p[..., 2], p[..., 1] / p[..., 2]
+        r2 = x * x + y * y
+        radial = 1.0 + self.k1 * r2 + self.k2 * r2 * r2
+        return np.stack([self.fx * x * radial + self.cx, self.fy * y * radial + self.cy], axis=-1)
 
     def unproject(self, pixels: np.ndarray) -> np.ndarray:
         """Unit bearing vectors (..., 3) in the camera frame of pixel coordinates (..., 2)."""
         px = np.asarray(pixels, dtype=np.float64)
-        x = (px[..., 0] - self.cx) / self.fx
-        y = (px[..., 1] - self.cy) / self.fy
+        if self.k1 or self.k2:  # OpenCV's iterative undistortion
+            flat = cv2.undistortPoints(px.reshape(-1, 1, 2), self.matrix, self.distortion,
+                                       criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12))
+            x, y = flat[:, 0, 0].reshape(px.shape[:-1]), flat[:, 0, 1].reshape(px.shape[:-1])
+        else:
+            x = (px[..., 0] - self.cx) / self.fx
+            y = (px[..., 1] - self.cy) / self.fy
         return normalize(np.stack([x, y, np.ones_like(x)], axis=-1))
 
 
 def gl_projection_from_intrinsics(k: CameraIntrinsics, near: float, far: float) -> np.ndarray:
-    """OpenGL projection matrix (4 x 4, row-major maths) that puts a point exactly where K does.
+    """OpenGL projection matrix (4 x 4, row-major maths) that puts a point exactly where K does
+    (without distortion, which a projection matrix cannot express).
 
     A camera-frame point that OpenCV projects to pixel (u, v) lands, after the OpenCV -> OpenGL axis flip,
     at window coordinates (u + 0.5, H - v - 0.5): GL pixel centres sit at half-integers, origin bottom left.

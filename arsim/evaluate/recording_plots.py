@@ -48,7 +48,8 @@ def frame_camera_orientations(rec: Recording) -> Rotation:
 
 def plot_coverage(rec: Recording, path: Path, samples: int = 20000) -> tuple[Path, float]:
     cam = rec.meta["camera"]
-    camera = CameraIntrinsics(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"])
+    camera = CameraIntrinsics(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"],
+                              cam.get("k1", 0.0), cam.get("k2", 0.0))
     rotations = frame_camera_orientations(rec)
     directions = fibonacci_directions(samples)
     seen = seen_by_views(rotations, camera, directions)

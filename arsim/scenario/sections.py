@@ -100,6 +100,8 @@ class CameraSection:
     height: int = setting(480, min=16, max=8192, unit="pixels", help="image height")
     hfov_deg: float = setting(60.0, min=1.0, max=179.0, unit="degrees", help="horizontal field of view (under 180)")
     fps: float = setting(30.0, min=0.1, max=1000.0, unit="Hz", help="frame rate")
+    k1: float = setting(0.0, min=-1.0, max=1.0, help="radial distortion k1 (OpenCV model)")
+    k2: float = setting(0.0, min=-1.0, max=1.0, help="radial distortion k2 (OpenCV model)")
     response: str = setting("s-curve", choices=("srgb", "gamma", "s-curve"), help="response curve")
     gamma: float = setting(2.2, min=0.1, max=10.0, help="exponent of the gamma response")
     contrast: float = setting(2.0, min=0.01, max=10.0, help="strength of the S-curve")

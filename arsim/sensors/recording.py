@@ -47,7 +47,7 @@ def capture_sweep(scenario: Scenario) -> CaptureSweep:
 
 def camera_intrinsics(scenario: Scenario) -> CameraIntrinsics:
     cam = scenario.device.camera
-    return CameraIntrinsics.from_fov(cam.width, cam.height, cam.hfov_deg)
+    return CameraIntrinsics.from_fov(cam.width, cam.height, cam.hfov_deg, cam.k1, cam.k2)
 
 
 def _csv(header: list[str], rows) -> str:
@@ -135,7 +135,7 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
         "seed": seed,
         "duration_s": sweep.duration,
         "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy,
-                   "cx": camera.cx, "cy": camera.cy, "fps": cam.fps},
+                   "cx": camera.cx, "cy": camera.cy, "k1": camera.k1, "k2": camera.k2, "fps": cam.fps},
         "camera_to_device": CAMERA_TO_DEVICE.tolist(),
         "fusion": scenario.capture.fusion,
         "scenario_toml": scenario_to_toml(scenario),

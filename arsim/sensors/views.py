@@ -44,8 +44,9 @@ class EnvironmentRenderer:
         self.texture.repeat_x = self.texture.repeat_y = False  # clamp to edge
         self.program = self.ctx.program(vertex_shader=_shader("fullscreen.vert"),
                                         fragment_shader=_shader("environment_view.frag"))
-        self.program["intrinsics"].value = (camera.fx, camera.fy, camera.cx, camera.cy)
-        self.program["image_size"].value = (float(camera.width), float(camera.height))
+        rays = np.ascontiguousarray(pixel_rays(camera)[::-1].astype(np.float32))  # GL rows run bottom-up
+        self.rays = self.ctx.texture((camera.width, camera.height), 3, rays.tobytes(), dtype="f4")
+        self.rays.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.vao = self.ctx.vertex_array(self.program, [])
         self.target = self.ctx.texture((camera.width, camera.height), 4, dtype="f4")
         self.fbo = self.ctx.framebuffer(color_attachments=[self.target])
@@ -54,7 +55,9 @@ class EnvironmentRenderer:
         """Radiance (H, W, 3) float32 of one view."""
         self.fbo.use()
         self.texture.use(0)
+        self.rays.use(1)
         self.program["probe"].value = 0
+        self.program["rays"].value = 1
         # GLSL mat3 uniforms are column-major: pass the transpose of the row-major matrix.
         self.program["camera_to_world"].write(camera_to_world.as_matrix().T.astype("f4").tobytes())
         self.vao.render(mode=moderngl.TRIANGLES, vertices=3)
@@ -63,5 +66,5 @@ class EnvironmentRenderer:
         return np.ascontiguousarray(image)
 
     def release(self) -> None:
-        for obj in (self.vao, self.program, self.fbo, self.target, self.texture):
+        for obj in (self.vao, self.program, self.fbo, self.target, self.texture, self.rays):
             obj.release()

@@ -3,9 +3,8 @@
 // The environment is an angle map extended past its rim (so bilinear lookups near -z stay inside).
 
 uniform sampler2D probe;        // angle map, row 0 of the image uploaded first (t = 1 at the top)
+uniform sampler2D rays;         // per pixel, its unit ray in OpenCV camera axes (lens distortion included)
 uniform mat3 camera_to_world;   // OpenCV camera axes (x right, y down, z forward) to world
-uniform vec4 intrinsics;        // fx, fy, cx, cy in pixels
-uniform vec2 image_size;        // width, height in pixels
 
 out vec4 radiance;
 
@@ -23,9 +22,8 @@ vec2 anglemap_st(vec3 d) {
 }
 
 void main() {
-    // OpenCV pixel coordinates: centres at integers, row 0 at the top; GL's origin is bottom left.
-    vec2 pixel = vec2(gl_FragCoord.x - 0.5, image_size.y - gl_FragCoord.y - 0.5);
-    vec3 ray = normalize(vec3((pixel.x - intrinsics.z) / intrinsics.x, (pixel.y - intrinsics.w) / intrinsics.y, 1.0));
+    // The ray texture is uploaded bottom row first, so fragment (x, y) reads its own pixel's ray.
+    vec3 ray = texelFetch(rays, ivec2(gl_FragCoord.xy), 0).xyz;
     vec2 st = anglemap_st(camera_to_world * ray);
     // Texture row 0 is the image's top row, at t = 1: flip t for the lookup.
     radiance = vec4(texture(probe, vec2(st.x, 1.0 - st.y)).rgb, 1.0);
