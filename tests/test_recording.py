@@ -107,3 +107,15 @@ def test_bad_device_settings_give_one_line(tmp_path, toml, fragments):
     scenario.write_text(toml)
     assert_one_line_error(arsim("record", scenario, "-o", tmp_path / "out"), *fragments)
     assert not (tmp_path / "out").exists()
+
+
+def test_camera_misalignment_is_applied_and_recorded(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    scenario = tmp_path / "tilted.toml"
+    scenario.write_text(SHORT.format(seed=1) + "[device]\ncamera_misalignment_deg = [0.0, 2.0, 0.0]\n")
+    r = arsim("record", scenario, "-o", tmp_path / "rec")
+    assert r.returncode == 0, r.stderr
+    mount = Rotation.from_matrix(np.array(load_recording(tmp_path / "rec").meta["camera_to_device"]))
+    nominal = Rotation.from_matrix(np.diag([1.0, -1.0, -1.0]))
+    assert (nominal.inv() * mount).magnitude() == pytest.approx(np.deg2rad(2.0), rel=1e-9)

@@ -13,7 +13,6 @@ from arsim.core.files import atomic_path
 from arsim.sensors.coverage import fibonacci_directions, seen_by_views
 from arsim.sensors.fusion import tilt_error_deg, yaw_error_deg
 from arsim.sensors.recording import Recording
-from arsim.sensors.trajectory import CAMERA_TO_DEVICE
 
 
 def _pyplot():
@@ -43,7 +42,7 @@ def frame_camera_orientations(rec: Recording) -> Rotation:
     t_truth, _, truth = rec.groundtruth
     t_frames = np.array([f["t_ns"] for f in rec.frames])
     nearest = np.clip(np.searchsorted(t_truth, t_frames), 0, len(t_truth) - 1)
-    return truth[nearest] * Rotation.from_matrix(CAMERA_TO_DEVICE)
+    return truth[nearest] * Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))
 
 
 def plot_coverage(rec: Recording, path: Path, samples: int = 20000) -> tuple[Path, float]:

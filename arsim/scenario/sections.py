@@ -128,6 +128,9 @@ class DeviceSection:
     accelerometer: AccelerometerSection = subsection(AccelerometerSection, help="accelerometer")
     magnetometer: MagnetometerSection = subsection(MagnetometerSection, help="magnetometer")
     camera: CameraSection = subsection(CameraSection, help="back camera")
+    camera_misalignment_deg: tuple[float, float, float] = setting(
+        (0.0, 0.0, 0.0), min=-10.0, max=10.0, unit="degrees",
+        help="x, y, z rotation of the camera against the IMU (device) axes beyond the nominal back-camera mount")
 
 
 @dataclass(frozen=True)

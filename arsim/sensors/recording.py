@@ -2,7 +2,7 @@
 other tools to read, and read back with checks that explain what is wrong.
 
 A recording folder holds:
-  meta.json          format version, seed, camera intrinsics, device-to-camera rotation, the scenario
+  meta.json          format version, seed, camera intrinsics, camera-to-device rotation, the scenario
   frames/NNNNNN.png  8-bit RGB frames;  frames.csv: t_ns, exposure_ns, iso, file
   imu.csv            t_ns, sensor, x, y, z   (gyroscope rad/s, accelerometer m/s², magnetometer µT)
   orientation.csv    t_ns, qx, qy, qz, qw    (the fused device-to-world orientation the app reads)
@@ -33,7 +33,7 @@ from arsim.scenario.environment import load_environment
 from arsim.sensors.camera import AutoExposure, ResponseCurve, SensorSettings, expose, vignette
 from arsim.sensors.fusion import mahony, yaw_error_deg
 from arsim.sensors.imu import SensorStream, sensor_model, simulate_imu
-from arsim.sensors.trajectory import CAMERA_TO_DEVICE, CaptureSweep
+from arsim.sensors.trajectory import CaptureSweep, camera_mount
 from arsim.sensors.views import EnvironmentRenderer
 
 FORMAT = "arsim-recording/1"
@@ -88,6 +88,7 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
     sweep = capture_sweep(scenario)
     camera = camera_intrinsics(scenario)
     cam = scenario.device.camera
+    mount = camera_mount(scenario.device.camera_misalignment_deg)
     # Independent streams per purpose, so adding frames does not change the IMU and vice versa.
     rng_imu, rng_frames = (np.random.default_rng([seed, k]) for k in (1, 2))
     device = scenario.device
@@ -109,7 +110,7 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
         for k in range(n_frames):
             t = k / cam.fps
             used = ae.next_frame_settings()
-            radiance = renderer.render(sweep.camera_orientation([t])[0])
+            radiance = renderer.render(sweep.camera_orientation([t], mount)[0])
             frame = expose(radiance, *used, sensor, response, rng_frames, falloff)
             ae.update(frame, used)
             name = f"{k:06d}.png"
@@ -136,7 +137,7 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
         "duration_s": sweep.duration,
         "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy,
                    "cx": camera.cx, "cy": camera.cy, "k1": camera.k1, "k2": camera.k2, "fps": cam.fps},
-        "camera_to_device": CAMERA_TO_DEVICE.tolist(),
+        "camera_to_device": mount.as_matrix().tolist(),
         "fusion": scenario.capture.fusion,
         "scenario_toml": scenario_to_toml(scenario),
     }

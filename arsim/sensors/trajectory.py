@@ -20,6 +20,12 @@ GRAVITY = np.array([0.0, -9.80665, 0.0])  # m/s², world frame
 CAMERA_TO_DEVICE = np.diag([1.0, -1.0, -1.0])
 
 
+def camera_mount(misalignment_deg=(0.0, 0.0, 0.0)) -> Rotation:
+    """Camera-to-device rotation: the nominal back-camera mount, then a small misalignment (x, y, z
+    degrees, about the camera's own axes)."""
+    return Rotation.from_matrix(CAMERA_TO_DEVICE) * Rotation.from_euler("xyz", misalignment_deg, degrees=True)
+
+
 def _smoothstep(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quintic ease 6u^5 - 15u^4 + 10u^3 on [0, 1] and its first two derivatives (zero at both ends)."""
     u = np.clip(u, 0.0, 1.0)
@@ -76,9 +82,9 @@ class Trajectory:
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         return self.orientation(t).inv().apply(self.acceleration(t) - GRAVITY)
 
-    def camera_orientation(self, t: np.ndarray) -> Rotation:
-        """OpenCV-camera-to-world rotations (the back camera)."""
-        return self.orientation(t) * Rotation.from_matrix(CAMERA_TO_DEVICE)
+    def camera_orientation(self, t: np.ndarray, camera_to_device: Rotation | None = None) -> Rotation:
+        """OpenCV-camera-to-world rotations of the back camera (nominal mount unless given)."""
+        return self.orientation(t) * (camera_to_device or Rotation.from_matrix(CAMERA_TO_DEVICE))
 
 
 @dataclass(frozen=True)
