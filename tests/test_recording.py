@@ -119,3 +119,15 @@ def test_camera_misalignment_is_applied_and_recorded(tmp_path):
     mount = Rotation.from_matrix(np.array(load_recording(tmp_path / "rec").meta["camera_to_device"]))
     nominal = Rotation.from_matrix(np.diag([1.0, -1.0, -1.0]))
     assert (nominal.inv() * mount).magnitude() == pytest.approx(np.deg2rad(2.0), rel=1e-9)
+
+
+def test_the_bracketed_burst_brightens_with_exposure(recordings):
+    import cv2
+
+    rec = load_recording(recordings["a"])
+    assert len(rec.burst) == 7
+    exposures = [b["exposure_ns"] for b in rec.burst]
+    assert exposures == sorted(exposures) and exposures[-1] == round(1e9 / 30)
+    assert exposures[-1] / exposures[0] == pytest.approx(2.0**6, rel=1e-6)
+    means = [cv2.imread(str(recordings["a"] / b["file"])).mean() for b in rec.burst]
+    assert all(a < b for a, b in zip(means, means[1:]))

@@ -145,6 +145,9 @@ class CaptureSection:
     sway_m: float = setting(0.03, min=0.0, max=1.0, unit="m", help="hand sway")
     fusion: str = setting("game-rotation-vector", choices=("game-rotation-vector", "rotation-vector"),
                           help="orientation the app reads")
+    burst_frames: int = setting(7, min=0, max=64, unit="frames",
+                                help="bracketed burst at the start pose for response calibration (0: none)")
+    burst_step: float = setting(2.0, min=1.01, max=16.0, help="exposure ratio between burst frames")
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,8 @@ other tools to read, and read back with checks that explain what is wrong.
 A recording folder holds:
   meta.json          format version, seed, camera intrinsics, camera-to-device rotation, the scenario
   frames/NNNNNN.png  8-bit RGB frames;  frames.csv: t_ns, exposure_ns, iso, file
+  burst/NN.png       a bracketed burst at the start pose, auto-exposure off (for response calibration);
+                     burst.csv: exposure_ns, iso, file
   imu.csv            t_ns, sensor, x, y, z   (gyroscope rad/s, accelerometer m/s², magnetometer µT)
   orientation.csv    t_ns, qx, qy, qz, qw    (the fused device-to-world orientation the app reads)
   groundtruth.csv    t_ns, px, py, pz, qx, qy, qz, qw  (true device pose at every gyroscope sample)
@@ -72,6 +74,23 @@ def _write_png(path: Path, frame: np.ndarray) -> None:
         tmp.write_bytes(_png_bytes(frame))
 
 
+def _write_burst(out_dir: Path, radiance: np.ndarray, scenario: Scenario, sensor: SensorSettings,
+                 response: ResponseCurve, rng: np.random.Generator, falloff: np.ndarray) -> list[tuple]:
+    """Bracketed frames of one view at base ISO, the longest exposure the sensor allows divided by
+    burst_step per frame; returns the burst.csv rows."""
+    capture = scenario.capture
+    (out_dir / "burst").mkdir(exist_ok=True)
+    rows = []
+    longest = sensor.exposure_range_s[1]
+    for k in range(capture.burst_frames):
+        exposure = max(longest / capture.burst_step ** (capture.burst_frames - 1 - k), sensor.exposure_range_s[0])
+        frame = expose(radiance, exposure, sensor.base_iso, sensor, response, rng, falloff)
+        name = f"burst/{k:02d}.png"
+        _write_png(out_dir / name, frame)
+        rows.append((int(round(exposure * 1e9)), sensor.base_iso, name))
+    return rows
+
+
 @dataclass(frozen=True)
 class RecordSummary:
     frames: int
@@ -90,7 +109,7 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
     cam = scenario.device.camera
     mount = camera_mount(scenario.device.camera_misalignment_deg)
     # Independent streams per purpose, so adding frames does not change the IMU and vice versa.
-    rng_imu, rng_frames = (np.random.default_rng([seed, k]) for k in (1, 2))
+    rng_imu, rng_frames, rng_burst = (np.random.default_rng([seed, k]) for k in (1, 2, 3))
     device = scenario.device
     streams = simulate_imu(sweep, rng_imu, sensor_model(device.gyroscope), sensor_model(device.accelerometer),
                            sensor_model(device.magnetometer))
@@ -103,6 +122,8 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
     response = ResponseCurve(cam.response, cam.gamma, cam.contrast)
     ae = AutoExposure(sensor, response)
     falloff = vignette(cam.height, cam.width, sensor.vignetting)
+    start_view = renderer.render(sweep.camera_orientation([0.0], mount)[0])
+    burst_rows = _write_burst(out_dir, start_view, scenario, sensor, response, rng_burst, falloff)
     n_frames = int(math.floor(sweep.duration * cam.fps)) + 1
     rows = []
     with ThreadPoolExecutor(2) as writers:  # PNG encoding releases the GIL: overlap it with rendering
@@ -122,6 +143,7 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
     renderer.release()
 
     write_text_atomic(out_dir / "frames.csv", _csv(["t_ns", "exposure_ns", "iso", "file"], rows))
+    write_text_atomic(out_dir / "burst.csv", _csv(["exposure_ns", "iso", "file"], burst_rows))
     imu_rows = sorted(((int(t), name, *np.round(v, 9)) for name in SENSORS
                        for t, v in zip(streams[name].t_ns, streams[name].values)), key=lambda r: (r[0], r[1]))
     write_text_atomic(out_dir / "imu.csv", _csv(["t_ns", "sensor", "x", "y", "z"], imu_rows))
@@ -154,6 +176,7 @@ class Recording:
     folder: Path
     meta: dict
     frames: list[dict]  # t_ns, exposure_ns, iso, file
+    burst: list[dict]  # exposure_ns, iso, file
     imu: dict[str, SensorStream]
     orientation: tuple[np.ndarray, Rotation]
     groundtruth: tuple[np.ndarray, np.ndarray, Rotation]
@@ -214,6 +237,14 @@ def load_recording(folder: Path) -> Recording:
         raise ArsimError(f"{folder / 'frames'}: {len(extra)} frames are not in frames.csv, first {extra[0]}; remove them or list them")
     frames = [{"t_ns": int(n[0]), "exposure_ns": int(n[1]), "iso": float(n[2]), "file": f} for n, f in zip(numbers, listed)]
 
+    path = folder / "burst.csv"
+    rows = _read_csv(path, ["exposure_ns", "iso", "file"])
+    numbers = _numbers(path, rows, slice(0, 2))
+    missing = [row[2] for row in rows if not (folder / row[2]).exists()]
+    if missing:
+        raise ArsimError(f"{path}: {len(missing)} listed burst frames are missing, first {missing[0]}; record again")
+    burst = [{"exposure_ns": int(n[0]), "iso": float(n[1]), "file": row[2]} for n, row in zip(numbers, rows)]
+
     path = folder / "imu.csv"
     rows = _read_csv(path, ["t_ns", "sensor", "x", "y", "z"])
     unknown = sorted({row[1] for row in rows} - set(SENSORS))
@@ -235,4 +266,4 @@ def load_recording(folder: Path) -> Recording:
     values = _numbers(path, _read_csv(path, ["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"]), slice(0, 8))
     _increasing(path, values[:, 0].astype(np.int64), "ground-truth poses")
     groundtruth = (values[:, 0].astype(np.int64), values[:, 1:4], Rotation.from_quat(values[:, 4:]))
-    return Recording(folder, meta, frames, imu, orientation, groundtruth)
+    return Recording(folder, meta, frames, burst, imu, orientation, groundtruth)
