@@ -44,11 +44,6 @@ def sh_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return theta, phi
 
 
-def sh_index(l: int, m: int) -> int:
-    """Position of (l, m) in a coefficient array, as Alg. 4.5: l(l+1) + m."""
-    return l * (l + 1) + m
-
-
 # ----------------------------------------------------------------------------------------------------
 # Associated Legendre functions, one m at a time for l = m .. order-1, vectorised over cos(theta)
 
@@ -276,12 +271,6 @@ class _GridSampler:
 def _disk_sampler(n: int, n_theta: int, n_phi: int) -> _GridSampler:
     """The sampler of every disk texel of an N x N angle map (kept: bakes map by map reuse it)."""
     return _GridSampler.of(anglemap_directions(n)[anglemap_disk_mask(n)], n_theta, n_phi)
-
-
-def sample_sh_grid(grid: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Bilinear samples (..., C) of one synthesis grid (C, n_theta, n_phi) at unit directions (..., 3)."""
-    d = np.asarray(directions, dtype=np.float64)
-    return _GridSampler.of(d.reshape(-1, 3), *grid.shape[1:])(grid).reshape(d.shape[:-1] + (grid.shape[0],))
 
 
 def synthesis_grid_size(order: int) -> tuple[int, int]:
