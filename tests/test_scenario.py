@@ -138,3 +138,14 @@ def test_parse_scenario_from_text_uses_the_assets_for_relative_paths():
 def test_shipped_scenarios_are_valid(path):
     s = load_scenario(path)
     assert s.environment.map.exists()
+
+
+def test_one_section_class_serves_tables_with_their_own_defaults():
+    s = parse_scenario("[device.magnetometer]\nnoise_density = 0.3\n")
+    assert s.device.magnetometer.noise_density == 0.3
+    assert s.device.magnetometer.rate_hz == 50.0  # the magnetometer's default, not the class's 200 Hz
+    assert s.device.gyroscope.rate_hz == 200.0 and s.device.accelerometer.full_scale > 150.0
+    # A section left out still has its default paths resolved (here the environment map).
+    assert s.environment.map.is_absolute() and s.environment.map.exists()
+    again = parse_scenario(scenario_to_toml(s))
+    assert again == s

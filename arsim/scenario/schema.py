@@ -44,10 +44,13 @@ def setting(
     return field(default=default, metadata=meta)
 
 
-def subsection(cls: type, *, help: str, array: bool = False) -> Any:
-    """Declare a nested table (`[a.b]`), or with array=True an array of tables (`[[a.b]]`)."""
-    factory = tuple if array else cls
-    return field(default_factory=factory, metadata={"help": help, "section": cls, "array": array})
+def subsection(cls: type, *, help: str, array: bool = False, default: Any = None) -> Any:
+    """Declare a nested table (`[a.b]`), or with array=True an array of tables (`[[a.b]]`).
+
+    default: an instance of cls whose values stand for the keys a scenario leaves out, so that one
+    section class can serve several tables with different defaults (the IMU's three sensors)."""
+    factory = tuple if array else (cls if default is None else (lambda: default))
+    return field(default_factory=factory, metadata={"help": help, "section": cls, "array": array, "default": default})
 
 
 @dataclass(frozen=True)
@@ -159,10 +162,12 @@ def _unknown_key(key: str, known: list[str], where: str, top_level: bool) -> Sce
     return ScenarioError(f"{where} unknown key '{key}': {mean}(known keys: {', '.join(known)})")
 
 
-def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, path: str = "") -> Any:
+def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, path: str = "",
+                  defaults: Any = None) -> Any:
     """An instance of the section dataclass cls from a TOML table, every key checked.
 
-    source names the file in messages; path is the table's dotted name ("" for the whole file)."""
+    source names the file in messages; path is the table's dotted name ("" for the whole file);
+    defaults, an instance of cls, replaces the class defaults for keys the table leaves out."""
     where = f"{source}: [{path}]" if path else f"{source}:"
     if not isinstance(table, dict):
         raise ScenarioError(f"{source}: '{path}' must be a table ([{path}]), got {_describe(table)}")
@@ -180,7 +185,11 @@ def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, pa
             raise ScenarioError(f"{where} {name} is missing: {f.metadata.get('help', 'required')}")
         elif isinstance(f.default, Path):
             raw = str(f.default)  # default paths resolve (and are checked) like written ones
+        elif sub is not None and not f.metadata["array"]:
+            raw = {}  # a section left out is parsed empty, so its default paths resolve too
         else:
+            if defaults is not None:
+                values[name] = getattr(defaults, name)
             continue
         if sub is not None:
             dotted = f"{path}.{name}" if path else name
@@ -191,7 +200,7 @@ def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, pa
                     parse_section(sub, item, source, resolver, f"{dotted}[{i}]") for i, item in enumerate(raw)
                 )
             else:
-                values[name] = parse_section(sub, raw, source, resolver, dotted)
+                values[name] = parse_section(sub, raw, source, resolver, dotted, f.metadata.get("default"))
             continue
         tp = hints[name]
         try:
@@ -200,11 +209,11 @@ def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, pa
             raise ScenarioError(f"{where} {name} = {_describe(raw)} has the wrong type: expected {_type_name(tp)}") from None
         _check_value(name, value, f.metadata, where, raw)
         if tp is Path or Path in typing.get_args(tp):
-            path, candidates = resolver.resolve(value)
-            if f.metadata["must_exist"] and not path.exists():
+            resolved, candidates = resolver.resolve(value)
+            if f.metadata["must_exist"] and not resolved.exists():
                 looked = " or ".join(str(c) for c in candidates)
                 raise ScenarioError(f"{where} {name} = {_describe(raw)}: no such file (looked for {looked}); fix the path")
-            value = path
+            value = resolved
         values[name] = value
     return cls(**values)
 

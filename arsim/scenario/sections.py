@@ -42,54 +42,34 @@ _G = 9.80665
 
 
 @dataclass(frozen=True)
-class GyroscopeSection:
-    """[device.gyroscope] (rad/s)."""
+class ImuSensorSection:
+    """[device.gyroscope], [device.accelerometer], [device.magnetometer]: one three-axis sensor, in its
+    Android unit U (rad/s, m/s², µT); each table has its own defaults (GYROSCOPE, ... below)."""
 
     rate_hz: float = setting(200.0, min=0.1, max=10000.0, unit="Hz", help="output data rate")
-    noise_density: float = setting(2.8e-3 * _DEG, min=0.0, max=1.0, help="white noise, rad/s/sqrt(Hz)")
-    bias_random_walk: float = setting(2e-5, min=0.0, max=1.0, help="bias random walk, rad/s/sqrt(s)")
-    bias_instability: float = setting(5e-5, min=0.0, max=1.0, help="Gauss-Markov bias, rad/s")
+    noise_density: float = setting(0.0, min=0.0, max=100.0, help="white noise, U/sqrt(Hz)")
+    bias_random_walk: float = setting(0.0, min=0.0, max=100.0, help="bias random walk, U/sqrt(s)")
+    bias_instability: float = setting(0.0, min=0.0, max=100.0, help="Gauss-Markov bias, U")
     bias_correlation_s: float = setting(100.0, min=0.01, max=1e6, unit="s", help="its correlation time")
-    turn_on_bias: float = setting(0.05 * _DEG, min=0.0, max=1.0, help="per-axis turn-on bias, rad/s")
-    scale_factor: float = setting(0.005, min=0.0, max=0.5, help="per-axis scale-factor error (fraction)")
-    misalignment_rad: float = setting(0.005, min=0.0, max=0.5, unit="rad", help="cross-axis terms")
-    full_scale: float = setting(2000 * _DEG, min=0.01, max=1e3, help="saturation, rad/s")
-    resolution: float = setting(4000 * _DEG / 2**19, min=0.0, max=1.0, help="LSB, rad/s (0: none)")
-    jitter_s: float = setting(2e-5, min=0.0, max=0.1, unit="s", help="timestamp jitter")
+    turn_on_bias: float = setting(0.0, min=0.0, max=1000.0, help="per-axis turn-on bias (or residual hard iron), U")
+    scale_factor: float = setting(0.0, min=0.0, max=0.5, help="per-axis scale-factor error (fraction; soft iron)")
+    misalignment_rad: float = setting(0.0, min=0.0, max=0.5, unit="rad", help="cross-axis terms")
+    full_scale: float = setting(1e5, min=0.01, max=1e5, help="saturation, U")
+    resolution: float = setting(0.0, min=0.0, max=100.0, help="LSB, U (0: none)")
+    jitter_s: float = setting(0.0, min=0.0, max=0.1, unit="s", help="timestamp jitter")
 
 
-@dataclass(frozen=True)
-class AccelerometerSection:
-    """[device.accelerometer] (m/s²)."""
-
-    rate_hz: float = setting(200.0, min=0.1, max=10000.0, unit="Hz", help="output data rate")
-    noise_density: float = setting(70e-6 * _G, min=0.0, max=10.0, help="white noise, m/s²/sqrt(Hz)")
-    bias_random_walk: float = setting(1e-4, min=0.0, max=10.0, help="bias random walk, m/s²/sqrt(s)")
-    bias_instability: float = setting(2e-3, min=0.0, max=10.0, help="Gauss-Markov bias, m/s²")
-    bias_correlation_s: float = setting(200.0, min=0.01, max=1e6, unit="s", help="its correlation time")
-    turn_on_bias: float = setting(0.02 * _G, min=0.0, max=10.0, help="per-axis turn-on bias, m/s²")
-    scale_factor: float = setting(0.005, min=0.0, max=0.5, help="per-axis scale-factor error (fraction)")
-    misalignment_rad: float = setting(0.01, min=0.0, max=0.5, unit="rad", help="cross-axis terms")
-    full_scale: float = setting(16 * _G, min=0.1, max=1e4, help="saturation, m/s²")
-    resolution: float = setting(32 * _G / 2**18, min=0.0, max=10.0, help="LSB, m/s² (0: none)")
-    jitter_s: float = setting(2e-5, min=0.0, max=0.1, unit="s", help="timestamp jitter")
-
-
-@dataclass(frozen=True)
-class MagnetometerSection:
-    """[device.magnetometer] (µT)."""
-
-    rate_hz: float = setting(50.0, min=0.1, max=10000.0, unit="Hz", help="output data rate")
-    noise_density: float = setting(0.1, min=0.0, max=100.0, help="white noise, µT/sqrt(Hz)")
-    bias_random_walk: float = setting(0.0, min=0.0, max=100.0, help="bias random walk, µT/sqrt(s)")
-    bias_instability: float = setting(0.0, min=0.0, max=100.0, help="Gauss-Markov bias, µT")
-    bias_correlation_s: float = setting(100.0, min=0.01, max=1e6, unit="s", help="its correlation time")
-    turn_on_bias: float = setting(0.5, min=0.0, max=1000.0, help="residual hard iron per axis, µT")
-    scale_factor: float = setting(0.01, min=0.0, max=0.5, help="soft iron per axis (fraction)")
-    misalignment_rad: float = setting(0.01, min=0.0, max=0.5, unit="rad", help="cross-axis terms")
-    full_scale: float = setting(4900.0, min=1.0, max=1e5, help="saturation, µT")
-    resolution: float = setting(0.15, min=0.0, max=100.0, help="LSB, µT (0: none)")
-    jitter_s: float = setting(1e-4, min=0.0, max=0.1, unit="s", help="timestamp jitter")
+GYROSCOPE = ImuSensorSection(
+    rate_hz=200.0, noise_density=2.8e-3 * _DEG, bias_random_walk=2e-5, bias_instability=5e-5,
+    bias_correlation_s=100.0, turn_on_bias=0.05 * _DEG, scale_factor=0.005, misalignment_rad=0.005,
+    full_scale=2000 * _DEG, resolution=4000 * _DEG / 2**19, jitter_s=2e-5)
+ACCELEROMETER = ImuSensorSection(
+    rate_hz=200.0, noise_density=70e-6 * _G, bias_random_walk=1e-4, bias_instability=2e-3,
+    bias_correlation_s=200.0, turn_on_bias=0.02 * _G, scale_factor=0.005, misalignment_rad=0.01,
+    full_scale=16 * _G, resolution=32 * _G / 2**18, jitter_s=2e-5)
+MAGNETOMETER = ImuSensorSection(
+    rate_hz=50.0, noise_density=0.1, bias_random_walk=0.0, bias_instability=0.0, bias_correlation_s=100.0,
+    turn_on_bias=0.5, scale_factor=0.01, misalignment_rad=0.01, full_scale=4900.0, resolution=0.15, jitter_s=1e-4)
 
 
 @dataclass(frozen=True)
@@ -124,9 +104,9 @@ class CameraSection:
 class DeviceSection:
     """[device]: the phone."""
 
-    gyroscope: GyroscopeSection = subsection(GyroscopeSection, help="gyroscope")
-    accelerometer: AccelerometerSection = subsection(AccelerometerSection, help="accelerometer")
-    magnetometer: MagnetometerSection = subsection(MagnetometerSection, help="magnetometer")
+    gyroscope: ImuSensorSection = subsection(ImuSensorSection, help="gyroscope (rad/s)", default=GYROSCOPE)
+    accelerometer: ImuSensorSection = subsection(ImuSensorSection, help="accelerometer (m/s²)", default=ACCELEROMETER)
+    magnetometer: ImuSensorSection = subsection(ImuSensorSection, help="magnetometer (µT)", default=MAGNETOMETER)
     camera: CameraSection = subsection(CameraSection, help="back camera")
     camera_misalignment_deg: tuple[float, float, float] = setting(
         (0.0, 0.0, 0.0), min=-10.0, max=10.0, unit="degrees",

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from arsim.core.errors import ArsimError
-from arsim.scenario.sections import AccelerometerSection, GyroscopeSection, MagnetometerSection
+from arsim.scenario import sections
 from arsim.sensors.trajectory import Trajectory
 
 DEG = np.pi / 180.0
@@ -63,9 +63,9 @@ def sensor_model(section) -> SensorModel:
 
 
 # The defaults live in the scenario schema (arsim/scenario/sections.py), the one place users see them.
-GYROSCOPE = sensor_model(GyroscopeSection())
-ACCELEROMETER = sensor_model(AccelerometerSection())
-MAGNETOMETER = sensor_model(MagnetometerSection())
+GYROSCOPE = sensor_model(sections.GYROSCOPE)
+ACCELEROMETER = sensor_model(sections.ACCELEROMETER)
+MAGNETOMETER = sensor_model(sections.MAGNETOMETER)
 
 
 @dataclass(frozen=True)
