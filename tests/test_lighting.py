@@ -240,3 +240,22 @@ def test_sh_coefficients_are_texel_sums_of_scipys_spherical_harmonics():
             real = np.sqrt(2) * (y.real if m > 0 else y.imag) if m else y.real
             expected[l * (l + 1) + m] = real @ lw
     np.testing.assert_allclose(sh_coefficients(env, order), expected, atol=1e-13)
+    np.testing.assert_allclose(sh_coefficients(env, order, compiled=False), expected, atol=1e-13)
+
+
+def test_compiled_sh_coefficients_equal_the_numpy_sums_at_high_order(courtyard32):
+    """The numba kernel against the NumPy reference, at an order where the recurrence runs long."""
+    env = np.concatenate([courtyard32, np.ones(courtyard32.shape[:2] + (1,))], axis=-1)  # as fast uses it
+    compiled, reference = sh_coefficients(env, 60), sh_coefficients(env, 60, compiled=False)
+    np.testing.assert_allclose(compiled, reference, rtol=0, atol=1e-12 * np.abs(reference).max())
+
+
+def test_compiled_synthesis_grid_equals_the_numpy_one(courtyard32):
+    from arsim.lighting.phong import phong_zonal_coefficients
+    from arsim.lighting.sh import sh_synthesis_grid
+
+    coeffs = sh_coefficients(courtyard32, 40)
+    kappas = np.stack([phong_zonal_coefficients(s, 40) for s in (1, 40, 320)])
+    compiled = sh_synthesis_grid(coeffs, kappas, 161, 320)
+    reference = sh_synthesis_grid(coeffs, kappas, 161, 320, compiled=False)
+    np.testing.assert_allclose(compiled, reference, rtol=0, atol=1e-12 * np.abs(reference).max())

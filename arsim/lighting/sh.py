@@ -7,7 +7,8 @@ phi = atan2(d_y, -d_x) (the thesis's u = 1 - 2s, v = 2t - 1). Real SH with the C
 Coefficients: c_lm = sum_i L_i Y_lm(w_i) W_i over the disk texels with their solid angles W_i
 (Alg. 4.4/4.5). Texels at the same disk radius share theta, so the Legendre functions are evaluated
 once per distinct radius (about N^2/8 of them) and the azimuthal sums per ring; the result is the
-texel sum itself, not an approximation of it.
+texel sum itself, not an approximation of it. The loop over (l, m) and rings runs compiled
+(sh_kernel.py, on every core); the NumPy loop here does the same sums and is its reference.
 
 Maps: M_s = sum_l kappa_l(s) sum_m c_lm Y_lm (eq. 2.31, 2.33) is synthesised on a fine (theta, phi) grid
 (Legendre sums, then an inverse FFT along phi) and sampled bilinearly at the texel directions.
@@ -30,6 +31,7 @@ import scipy.fft
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.lighting.phong import phong_zonal_coefficients
+from arsim.lighting.sh_kernel import bilinear_lookup, project_rings, synthesise_rings
 
 MAX_ORDER = 512
 # Up to this order the maps are evaluated directly at every texel (exact); beyond, through a grid.
@@ -165,9 +167,9 @@ class _Orbits:
         return cls(theta, ring_starts, alpha, texel_orbit, sigma, k)
 
 
-def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False) -> np.ndarray:
+def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False, compiled: bool = True) -> np.ndarray:
     """SH coefficients (order^2, C) of an angle map (N, N, C), summed over its disk texels with their
-    solid angles."""
+    solid angles. compiled=False runs the same sums in NumPy (the reference of sh_kernel)."""
     n = env.shape[0]
     orbits = _Orbits.of(n)
     inside = anglemap_disk_mask(n)
@@ -184,6 +186,15 @@ def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False) -> np.n
                 weights = lw[sel, ch] * phase[sel]
                 partial[side, r, :, ch] = (np.bincount(orbits.texel_orbit[sel], weights.real, n_orbits)
                                            + 1j * np.bincount(orbits.texel_orbit[sel], weights.imag, n_orbits))
+    if not faithful and compiled:
+        ring_of_orbit = np.repeat(np.arange(orbits.ring_starts.size), np.diff(np.r_[orbits.ring_starts, n_orbits]))
+        projected = project_rings(np.cos(orbits.theta), np.sin(orbits.theta), ring_of_orbit, orbits.alpha,
+                                  partial, order)
+        coeffs = np.zeros((order * order, channels))
+        for m in range(order):
+            ls = np.arange(m, order)
+            _store_rows(coeffs, m, ls, projected[m, m:])
+        return coeffs
     coeffs = np.zeros((order * order, channels))
     step = np.exp(1j * orbits.alpha)
     z = np.ones_like(step)
@@ -192,16 +203,19 @@ def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False) -> np.n
             z = z * step
         per_orbit = z[:, None] * partial[0, m % 4]
         per_orbit += np.conj(z)[:, None] * partial[1, m % 4]
-        ring_sums = np.add.reduceat(per_orbit, orbits.ring_starts, axis=0)  # (R, 3): sum L W e^{i m phi}
-        ls = np.arange(m, order)
+        ring_sums = np.add.reduceat(per_orbit, orbits.ring_starts, axis=0)  # (R, C): sum L W e^{i m phi}
         with np.errstate(invalid="ignore", over="ignore"):
-            c = p @ ring_sums.view(np.float64)  # real BLAS on (re, im) pairs: (order-m, 6)
-        if m == 0:
-            coeffs[ls * (ls + 1)] = c[:, 0::2]
-        else:
-            coeffs[ls * (ls + 1) + m] = np.sqrt(2.0) * c[:, 0::2]
-            coeffs[ls * (ls + 1) - m] = np.sqrt(2.0) * c[:, 1::2]
+            _store_rows(coeffs, m, np.arange(m, order), p @ ring_sums.view(np.float64))  # real BLAS on (re, im)
     return np.nan_to_num(coeffs, nan=0.0, posinf=0.0, neginf=0.0) if faithful else coeffs
+
+
+def _store_rows(coeffs: np.ndarray, m: int, ls: np.ndarray, projected: np.ndarray) -> None:
+    """Rows l(l+1) +- m of the real coefficients from the complex projections (l = ls, (re, im) per channel)."""
+    if m == 0:
+        coeffs[ls * (ls + 1)] = projected[:, 0::2]
+    else:
+        coeffs[ls * (ls + 1) + m] = np.sqrt(2.0) * projected[:, 0::2]
+        coeffs[ls * (ls + 1) - m] = np.sqrt(2.0) * projected[:, 1::2]
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -209,37 +223,38 @@ def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False) -> np.n
 
 
 def sh_synthesis_grid(coeffs: np.ndarray, kappas: np.ndarray, n_theta: int, n_phi: int,
-                      faithful: bool = False) -> np.ndarray:
+                      faithful: bool = False, compiled: bool = True) -> np.ndarray:
     """Values (E, C, n_theta, n_phi) of sum_lm kappa_l c_lm Y_lm on the grid theta_r = r pi/(n_theta-1),
-    phi_c = 2 pi c / n_phi, for E sets of zonal factors kappas (E, order)."""
+    phi_c = 2 pi c / n_phi, for E sets of zonal factors kappas (E, order). compiled=False: NumPy (reference)."""
     n_maps, order = kappas.shape
     channels = coeffs.shape[1]
     theta = np.linspace(0.0, np.pi, n_theta)
-    spectrum = np.zeros((n_maps * channels, n_theta, n_phi // 2 + 1), dtype=np.complex128)
-    for m, p in _Legendre(theta, order, faithful):
+    # Per m, the weighted coefficients as the spectrum of phi:
+    # sum_m sqrt2 (a_m cos m phi + b_m sin m phi) = Re sum_m sqrt2 (a_m - i b_m) e^{i m phi}
+    weighted = np.zeros((order, order, n_maps * channels), dtype=np.complex128)  # [m, l, (map, channel)]
+    for m in range(order):
         ls = np.arange(m, order)
         a = coeffs[ls * (ls + 1) + m]  # (order-m, C)
-        if m > 0:
-            # x(phi) = sum_m sqrt2 (a_m cos m phi + b_m sin m phi) = Re sum_m sqrt2 (a_m - i b_m) e^{i m phi}
-            a = (n_phi / 2) * np.sqrt(2.0) * (a - 1j * coeffs[ls * (ls + 1) - m])
-        else:
-            a = n_phi * a
-        weighted = (kappas[:, m:, None] * a[None]).transpose(0, 2, 1).reshape(n_maps * channels, order - m)
-        with np.errstate(invalid="ignore", over="ignore"):
-            if faithful:
-                p = np.nan_to_num(p, nan=0.0, posinf=0.0, neginf=0.0)
-            spectrum[:, :, m] = weighted @ p  # (E*C, n_theta), BLAS
+        a = (n_phi / 2) * np.sqrt(2.0) * (a - 1j * coeffs[ls * (ls + 1) - m]) if m > 0 else n_phi * a
+        weighted[m, m:] = (kappas[:, m:, None] * a[None]).transpose(1, 0, 2).reshape(order - m, -1)
+    if compiled and not faithful:
+        spectrum = synthesise_rings(np.cos(theta), np.sin(theta), weighted, n_phi // 2 + 1)
+    else:
+        spectrum = np.zeros((n_maps * channels, n_theta, n_phi // 2 + 1), dtype=np.complex128)
+        for m, p in _Legendre(theta, order, faithful):
+            with np.errstate(invalid="ignore", over="ignore"):
+                if faithful:
+                    p = np.nan_to_num(p, nan=0.0, posinf=0.0, neginf=0.0)
+                spectrum[:, :, m] = weighted[m, m:].T @ p  # (E*C, n_theta), BLAS
     return scipy.fft.irfft(spectrum, n=n_phi, axis=-1, workers=-1).reshape(n_maps, channels, n_theta, n_phi)
 
 
 @dataclass(frozen=True)
 class _GridSampler:
-    """Bilinear lookups of (theta, phi) grids at fixed directions: indices and weights computed once,
-    and the lookups made in grid order (then put back), so that the gathers walk memory forwards."""
+    """Bilinear lookups of (theta, phi) grids at fixed directions, indices and weights computed once."""
 
-    index: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-    weight: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-    order: np.ndarray  # lookup k is for direction order[k]
+    index: np.ndarray  # (K, 4) flat grid indices of the four corners
+    weight: np.ndarray  # (K, 4)
 
     @classmethod
     def of(cls, directions: np.ndarray, n_theta: int, n_phi: int) -> _GridSampler:
@@ -251,20 +266,14 @@ class _GridSampler:
         fr, fc = r - r0, c - c0
         c0 %= n_phi
         c1 = (c0 + 1) % n_phi  # longitude wraps
-        index = (r0 * n_phi + c0, r0 * n_phi + c1, (r0 + 1) * n_phi + c0, (r0 + 1) * n_phi + c1)
-        weight = ((1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc)
-        order = np.argsort(index[0], kind="stable")
-        return cls(tuple(i[order] for i in index), tuple(w[order, None] for w in weight), order)
+        index = np.stack([r0 * n_phi + c0, r0 * n_phi + c1, (r0 + 1) * n_phi + c0, (r0 + 1) * n_phi + c1], axis=1)
+        weight = np.stack([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc], axis=1)
+        return cls(index, weight)
 
     def __call__(self, grid: np.ndarray) -> np.ndarray:
         """(K, C) samples of a (C, n_theta, n_phi) grid."""
-        texels = np.ascontiguousarray(grid.reshape(grid.shape[0], -1).T)  # one gather fetches all channels
-        values = self.weight[0] * texels[self.index[0]]
-        for i, w in zip(self.index[1:], self.weight[1:]):
-            values += w * texels[i]
-        out = np.empty_like(values)
-        out[self.order] = values
-        return out
+        texels = np.ascontiguousarray(grid.reshape(grid.shape[0], -1).T)  # one row fetches all channels
+        return bilinear_lookup(texels, self.index, self.weight)
 
 
 @functools.lru_cache(maxsize=8)
@@ -328,8 +337,9 @@ def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[i
         else:
             size = synthesis_grid_size(o)
             grid = sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful)
-            sample = _disk_sampler(n, *size)
-            all_values = [sample(g) for g in grid]
+            # One lookup for all maps of this order: each gather then fetches every map's channels.
+            flat = _disk_sampler(n, *size)(grid.reshape((-1,) + grid.shape[2:]))
+            all_values = flat.reshape(flat.shape[0], len(which), -1).transpose(1, 0, 2)
         for values, k in zip(all_values, which):
             if normalise:
                 den = values[:, 3:]

@@ -1,0 +1,165 @@
+"""The compiled heart of `sh_coefficients`: ring sums times associated Legendre functions, for every (l, m).
+
+Per m, the azimuthal sums of each ring are gathered from its orbits' partial sums, then the orthonormal
+Legendre recurrence runs over the rings in blocks small enough for the first-level cache, with the
+projections accumulated as it goes, so that the (order^2/2 x rings) Legendre table is never stored.
+Threads take whole m values (numba prange), large and small m interleaved so the shares are equal.
+The NumPy path in sh.py computes the same sums (up to rounding) and is the reference in the tests.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+RING_BLOCK = 128
+
+
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def project_rings(cos_theta, sin_theta, ring_of_orbit, alpha, partial, order):  # pragma: no cover (compiled)
+    """(order, order, 2C) array: [m, l] holds sum over rings of P~_lm(theta_r) S_m(r), real and imaginary
+    parts per channel, with S_m(r) = sum over the orbits o of ring r of e^{i m alpha_o} a_o + e^{-i m alpha_o} b_o
+    and partial[0 or 1, m mod 4, o] = a_o or b_o (see sh._Orbits)."""
+    n_rings = cos_theta.size
+    n_orbits = alpha.size
+    channels = partial.shape[3]
+    out = np.zeros((order, order, 2 * channels))
+    perm = np.empty(order, dtype=np.int64)  # 0, order-1, 1, order-2, ...: equal work in each half
+    lo, hi = 0, order - 1
+    for k in range(order):
+        if k % 2 == 0:
+            perm[k] = lo
+            lo += 1
+        else:
+            perm[k] = hi
+            hi -= 1
+    inv_sqrt_4pi = 1.0 / math.sqrt(4.0 * math.pi)
+    for k in numba.prange(order):
+        m = perm[k]
+        r4 = m % 4
+        sums = np.zeros((2 * channels, n_rings))
+        for o in range(n_orbits):
+            c = math.cos(m * alpha[o])
+            s = math.sin(m * alpha[o])
+            r = ring_of_orbit[o]
+            for ch in range(channels):
+                a = partial[0, r4, o, ch]
+                b = partial[1, r4, o, ch]
+                sums[2 * ch, r] += c * (a.real + b.real) - s * (a.imag - b.imag)  # z a + conj(z) b
+                sums[2 * ch + 1, r] += c * (a.imag + b.imag) + s * (a.real - b.real)
+        n_l = order - m
+        ca = np.zeros(n_l)
+        cab = np.zeros(n_l)
+        for j in range(2, n_l):
+            l = m + j
+            ca[j] = math.sqrt((4.0 * l * l - 1.0) / (l * l - m * m))
+            cab[j] = ca[j] * math.sqrt(((l - 1.0) ** 2 - m * m) / (4.0 * (l - 1.0) ** 2 - 1.0))
+        pmm_factor = inv_sqrt_4pi  # P~_mm = pmm_factor (-sin theta)^m, Condon-Shortley phase included
+        for q in range(1, m + 1):
+            pmm_factor *= math.sqrt((2.0 * q + 1.0) / (2.0 * q))
+        start1 = math.sqrt(2.0 * m + 3.0)
+        acc = np.zeros((n_l, 2 * channels))
+        p0 = np.empty(RING_BLOCK)
+        p1 = np.empty(RING_BLOCK)
+        for r0 in range(0, n_rings, RING_BLOCK):
+            nb = min(RING_BLOCK, n_rings - r0)
+            x = cos_theta[r0:r0 + nb]
+            rs = sums[:, r0:r0 + nb]
+            for b in range(nb):
+                p0[b] = pmm_factor * (-sin_theta[r0 + b]) ** m
+            for q in range(2 * channels):
+                t = 0.0
+                for b in range(nb):
+                    t += p0[b] * rs[q, b]
+                acc[0, q] += t
+            if n_l > 1:
+                for b in range(nb):
+                    p1[b] = start1 * x[b] * p0[b]
+                for q in range(2 * channels):
+                    t = 0.0
+                    for b in range(nb):
+                        t += p1[b] * rs[q, b]
+                    acc[1, q] += t
+            for j in range(2, n_l):
+                a = ca[j]
+                ab = cab[j]
+                for b in range(nb):
+                    v = a * x[b] * p1[b] - ab * p0[b]
+                    p0[b] = p1[b]
+                    p1[b] = v
+                for q in range(2 * channels):
+                    t = 0.0
+                    for b in range(nb):
+                        t += p1[b] * rs[q, b]
+                    acc[j, q] += t
+        for j in range(n_l):
+            for q in range(2 * channels):
+                out[m, m + j, q] = acc[j, q]
+    return out
+
+
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def synthesise_rings(cos_theta, sin_theta, weighted, n_freq):  # pragma: no cover (compiled)
+    """Spectrum (Q, R, n_freq) complex: [q, r, m] = sum_l weighted[m, l, q] P~_lm(theta_r) for m < order
+    (zero above), weighted being (order, order, Q) complex with [m, l] used for l >= m. The inverse FFT
+    of it along m gives the synthesis grid (sh.sh_synthesis_grid)."""
+    order = weighted.shape[0]
+    n_q = weighted.shape[2]
+    n_rings = cos_theta.size
+    out = np.zeros((n_q, n_rings, n_freq), dtype=np.complex128)
+    perm = np.empty(order, dtype=np.int64)
+    lo, hi = 0, order - 1
+    for k in range(order):
+        if k % 2 == 0:
+            perm[k] = lo
+            lo += 1
+        else:
+            perm[k] = hi
+            hi -= 1
+    inv_sqrt_4pi = 1.0 / math.sqrt(4.0 * math.pi)
+    for k in numba.prange(order):
+        m = perm[k]
+        n_l = order - m
+        ca = np.zeros(n_l)
+        cab = np.zeros(n_l)
+        for j in range(2, n_l):
+            l = m + j
+            ca[j] = math.sqrt((4.0 * l * l - 1.0) / (l * l - m * m))
+            cab[j] = ca[j] * math.sqrt(((l - 1.0) ** 2 - m * m) / (4.0 * (l - 1.0) ** 2 - 1.0))
+        pmm_factor = inv_sqrt_4pi
+        for q in range(1, m + 1):
+            pmm_factor *= math.sqrt((2.0 * q + 1.0) / (2.0 * q))
+        start1 = math.sqrt(2.0 * m + 3.0)
+        for r in range(n_rings):
+            x = cos_theta[r]
+            p0 = pmm_factor * (-sin_theta[r]) ** m
+            for q in range(n_q):
+                out[q, r, m] = weighted[m, m, q] * p0
+            if n_l > 1:
+                p1 = start1 * x * p0
+                for q in range(n_q):
+                    out[q, r, m] += weighted[m, m + 1, q] * p1
+                for j in range(2, n_l):
+                    v = ca[j] * x * p1 - cab[j] * p0
+                    p0 = p1
+                    p1 = v
+                    for q in range(n_q):
+                        out[q, r, m] += weighted[m, m + j, q] * v
+    return out
+
+
+@numba.njit(parallel=True, cache=True)
+def bilinear_lookup(texels, index, weight):  # pragma: no cover (compiled)
+    """(K, C): sum over the four corners c of weight[k, c] texels[index[k, c]], texels being (P, C)."""
+    n_out = index.shape[0]
+    channels = texels.shape[1]
+    out = np.zeros((n_out, channels))
+    for k in numba.prange(n_out):
+        for c in range(4):
+            w = weight[k, c]
+            row = index[k, c]
+            for ch in range(channels):
+                out[k, ch] += w * texels[row, ch]
+    return out
