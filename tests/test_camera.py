@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from arsim.core.errors import ArsimError
-from arsim.sensors.camera import RESPONSES, AutoExposure, ResponseCurve, SensorSettings, expose, metered_level, vignette
+from arsim.sensors.camera import (RESPONSES, AutoExposure, ResponseCurve, SensorSettings, expose, metered_level, noise_key,
+                                  pixel_normals, vignette)
 
 
 @pytest.mark.parametrize("kind", RESPONSES)
@@ -25,11 +26,11 @@ def test_unknown_response_is_refused():
 def test_shot_noise_grows_with_the_square_root_of_the_signal():
     sensor = SensorSettings(vignetting=0.0, read_noise_e=0.0)
     curve = ResponseCurve("gamma", gamma=1.0)  # linear, to read the noise directly
-    rng = np.random.default_rng(0)
     stds = []
-    for level in (0.1, 0.4):
+    for k, level in enumerate((0.1, 0.4)):
         radiance = np.full((200, 200, 3), level / (sensor.sensitivity * 0.01))
-        frame = expose(radiance, 0.01, sensor.base_iso, sensor, curve, rng).astype(float) / 255
+        normals = pixel_normals(noise_key(0, "frames", k), 200, 200)
+        frame = expose(radiance, 0.01, sensor.base_iso, sensor, curve, normals).astype(float) / 255
         stds.append(frame.std())
         assert frame.mean() == pytest.approx(level, abs=0.004)
     expected = [np.sqrt(level * sensor.full_well_e) / sensor.full_well_e for level in (0.1, 0.4)]
@@ -46,13 +47,12 @@ def test_vignetting_is_one_at_the_centre_and_falls_to_the_corners():
 def test_auto_exposure_settles_within_its_configured_frames(dark, bright):
     sensor, curve = SensorSettings(), ResponseCurve()
     ae = AutoExposure(sensor, curve)
-    rng = np.random.default_rng(1)
     falloff = vignette(48, 64, sensor.vignetting)
     levels, settings, extreme = [], [], []
     for k in range(80):
         scene = np.full((48, 64, 3), dark if k < 40 else bright)
         used = ae.next_frame_settings()
-        frame = expose(scene, *used, sensor, curve, rng, falloff)
+        frame = expose(scene, *used, sensor, curve, pixel_normals(noise_key(1, "frames", k), 48, 64), falloff)
         ae.update(frame, used)
         levels.append(metered_level(frame, curve))
         settings.append(used)
@@ -74,10 +74,10 @@ def test_auto_exposure_settles_within_its_configured_frames(dark, bright):
 def test_auto_exposure_stays_within_limits_when_the_scene_is_too_dark():
     sensor, curve = SensorSettings(), ResponseCurve()
     ae = AutoExposure(sensor, curve)
-    rng = np.random.default_rng(2)
-    for _ in range(30):
+    for k in range(30):
         used = ae.next_frame_settings()
-        ae.update(expose(np.full((16, 16, 3), 1e-4), *used, sensor, curve, rng), used)
+        ae.update(expose(np.full((16, 16, 3), 1e-4), *used, sensor, curve, pixel_normals(noise_key(2, "frames", k), 16, 16)),
+                  used)
     assert used == (sensor.exposure_range_s[1], sensor.iso_range[1])
 
 
@@ -94,3 +94,16 @@ def test_8_bit_encoding_equals_rounding_the_curve(kind, gamma):
     rng = np.random.default_rng(7)
     x = np.concatenate([rng.random(200000) * 1.2, rng.random(50000) * 1e-3, [-1.0, 0.0, 1.0, 2.0]])
     np.testing.assert_array_equal(curve.encode(x), np.round(curve.apply(x) * 255).astype(np.uint8))
+
+
+def test_hashed_pixel_normals_are_standard_normal_and_independent():
+    from scipy import stats
+
+    a = pixel_normals(noise_key(0, "frames", 0), 240, 320).ravel()
+    b = pixel_normals(noise_key(0, "frames", 1), 240, 320).ravel()
+    assert abs(a.mean()) < 0.01 and abs(a.std() - 1) < 0.01
+    assert stats.kstest(a, "norm").pvalue > 1e-3  # the Box-Muller output is Gaussian
+    assert abs(np.corrcoef(a, b)[0, 1]) < 0.01  # frames draw different noise
+    assert abs(np.corrcoef(a[:-1], a[1:])[0, 1]) < 0.01  # neighbouring samples too
+    assert not np.array_equal(pixel_normals(noise_key(1, "frames", 0), 4, 4), pixel_normals(noise_key(0, "frames", 0), 4, 4))
+    assert noise_key(0, "frames", 3) != noise_key(0, "burst", 3)

@@ -77,6 +77,13 @@ class ResponseCurve:
         codes += x >= thresholds[codes]
         return codes.astype(np.uint8)
 
+    def thresholds_float32(self) -> np.ndarray:
+        """The 255 code thresholds rounded up to float32: for a float32 x, x >= t exactly when
+        x >= this (what a shader compares against)."""
+        t = self._code_thresholds
+        t32 = t.astype(np.float32)
+        return np.where(t32.astype(np.float64) < t, np.nextafter(t32, np.float32(np.inf)), t32)
+
     def decode(self, codes: np.ndarray) -> np.ndarray:
         """Relative exposure of 8-bit codes (a 256-entry table of the inverse curve)."""
         return self._code_values[codes]
@@ -136,28 +143,63 @@ def vignette(height: int, width: int, strength: float) -> np.ndarray:
     return 1.0 - strength * r2 * r2
 
 
+def pcg_hash(v: np.ndarray) -> np.ndarray:
+    """The PCG hash (Jarzynski and Olano 2020) on uint32, as shaders/camera_frame.frag computes it."""
+    v = np.asarray(v, dtype=np.uint32)
+    with np.errstate(over="ignore"):  # arithmetic modulo 2^32 is the point
+        state = v * np.uint32(747796405) + np.uint32(2891336453)
+        word = ((state >> ((state >> np.uint32(28)) + np.uint32(4))) ^ state) * np.uint32(277803737)
+    return (word >> np.uint32(22)) ^ word
+
+
+NOISE_STREAMS = {"frames": 1, "burst": 2}
+
+
+def noise_key(seed: int, stream: str, frame: int) -> int:
+    """The 32-bit key of one frame's noise: a hash chain of seed, stream and frame index."""
+    key = pcg_hash(np.uint32(seed & 0xFFFFFFFF))
+    key = pcg_hash(key + np.uint32(NOISE_STREAMS[stream]))
+    return int(pcg_hash(key + np.uint32(frame & 0xFFFFFFFF)))
+
+
+def pixel_normals(key: int, height: int, width: int) -> np.ndarray:
+    """Standard normals (H, W, 3) float32 of one frame: Box-Muller on two hashed uniforms per sample n
+    (row-major, channel fastest), so that every pixel's noise is known without a sequential generator
+    and the GL camera (camera_frame.frag) draws the very same numbers."""
+    n = np.arange(height * width * 3, dtype=np.uint32)
+    u = [(((pcg_hash(np.uint32(2) * n + np.uint32(j) + np.uint32(key)) >> np.uint32(8)) + np.uint32(1))
+          .astype(np.float32) * np.float32(1.0 / 16777216.0)) for j in (0, 1)]
+    two_pi = np.float32(2.0) * np.float32(np.pi)
+    normals = np.sqrt(np.float32(-2.0) * np.log(u[0])) * np.cos(two_pi * u[1])
+    return normals.reshape(height, width, 3)
+
+
 def expose(radiance: np.ndarray, exposure_s: float, iso: float, sensor: SensorSettings, response: ResponseCurve,
-           rng: np.random.Generator, falloff: np.ndarray | None = None) -> np.ndarray:
+           normals: np.ndarray, falloff: np.ndarray | None = None) -> np.ndarray:
     """An 8-bit RGB frame (H, W, 3) of the scene radiance: photons to electrons with shot and read
-    noise, analog gain, clipping, the response curve, and quantisation."""
+    noise (normals: standard normals of the frame's shape, see pixel_normals), analog gain, clipping,
+    the response curve, and quantisation. The NumPy reference of the GL camera (views.CameraRenderer)."""
     falloff = vignette(*radiance.shape[:2], sensor.vignetting) if falloff is None else falloff
     # float32 throughout: the result is 8 bits, and a 640 x 480 frame is 0.9 M samples per channel.
     scale = np.float32(exposure_s * sensor.sensitivity * sensor.full_well_e)
     electrons = np.maximum(radiance.astype(np.float32) * scale * falloff[..., None].astype(np.float32), 0.0)
-    noise = rng.standard_normal(electrons.shape, dtype=np.float32)
-    electrons += noise * np.sqrt(electrons + np.float32(sensor.read_noise_e**2))
+    electrons += normals.astype(np.float32) * np.sqrt(electrons + np.float32(sensor.read_noise_e**2))
     signal = electrons * np.float32(iso / sensor.base_iso / sensor.full_well_e)
     return response.encode(signal)
+
+
+@functools.lru_cache(maxsize=8)
+def _metering_weights(height: int, width: int) -> np.ndarray:
+    y, x = np.mgrid[0:height, 0:width]
+    weight = np.exp(-(((x - width / 2) / (0.35 * width)) ** 2 + ((y - height / 2) / (0.35 * height)) ** 2))
+    return weight / weight.sum()
 
 
 def metered_level(frame: np.ndarray, response: ResponseCurve) -> float:
     """Centre-weighted mean linear luminance of an 8-bit frame (what the auto-exposure measures), from
     every fourth pixel in each direction as camera pipelines meter on low-resolution statistics."""
     linear = response.decode(frame[::4, ::4]) @ LUMA
-    h, w = linear.shape
-    y, x = np.mgrid[0:h, 0:w]
-    weight = np.exp(-(((x - w / 2) / (0.35 * w)) ** 2 + ((y - h / 2) / (0.35 * h)) ** 2))
-    return float((linear * weight).sum() / weight.sum())
+    return float((linear * _metering_weights(*linear.shape)).sum())
 
 
 @dataclass
@@ -198,9 +240,10 @@ class AutoExposure:
         # A mostly white (black) frame only bounds the right product from above (below): jump below
         # (above) that bound by clipped_step. Frames taken before earlier jumps (latency) repeat an old
         # bound and change nothing, so the jumps do not compound.
-        if np.mean(frame >= 255) > 0.5:
+        stats = frame[::4, ::4]  # the metering grid
+        if np.mean(stats >= 255) > 0.5:
             self.product = float(np.clip(min(self.product, wanted / s.clipped_step), lo, hi))
-        elif np.mean(frame <= 0) > 0.5:
+        elif np.mean(stats <= 0) > 0.5:
             self.product = float(np.clip(max(self.product, wanted * s.clipped_step), lo, hi))
         else:
             step = np.exp(s.convergence * np.log(wanted / self.product))

@@ -18,16 +18,34 @@ def fibonacci_directions(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
-def seen_by_views(camera_to_world: Rotation, camera: CameraIntrinsics, directions: np.ndarray) -> np.ndarray:
-    """For each direction (K, 3), whether any of the camera orientations has it in its image."""
+def _cone_cosine(camera: CameraIntrinsics) -> float:
+    """Cosine of the widest angle between the optical axis and a ray through the image's border."""
+    w, h = camera.width, camera.height
+    u = np.r_[np.linspace(-0.5, w - 0.5, w + 1), np.full(h + 1, -0.5), np.linspace(-0.5, w - 0.5, w + 1),
+              np.full(h + 1, w - 0.5)]
+    v = np.r_[np.full(w + 1, -0.5), np.linspace(-0.5, h - 0.5, h + 1), np.full(w + 1, h - 0.5),
+              np.linspace(-0.5, h - 0.5, h + 1)]
+    return float(camera.unproject(np.stack([u, v], axis=-1))[:, 2].min())
+
+
+def seen_by_views(camera_to_world: Rotation, camera: CameraIntrinsics, directions: np.ndarray,
+                  chunk: int = 64) -> np.ndarray:
+    """For each direction (K, 3), whether any of the camera orientations has it in its image. A cone
+    around each view's axis picks the candidates (one matrix product); only they are projected."""
     seen = np.zeros(len(directions), dtype=bool)
-    for rotation in camera_to_world:
-        cam = rotation.inv().apply(directions)
-        ahead = cam[:, 2] > 1e-9
-        px = camera.project(np.where(ahead[:, None], cam, 1.0))
-        inside = ahead & (px[:, 0] >= -0.5) & (px[:, 0] <= camera.width - 0.5) \
-            & (px[:, 1] >= -0.5) & (px[:, 1] <= camera.height - 0.5)
-        seen |= inside
+    world_to_camera = camera_to_world.inv().as_matrix().reshape(-1, 3, 3)
+    margin = _cone_cosine(camera) - 1e-6
+    for start in range(0, len(world_to_camera), chunk):
+        rotations = world_to_camera[start:start + chunk]
+        near_axis = rotations[:, 2, :] @ directions.T > margin  # (c, K): row 2 is the optical axis in world
+        view, k = np.nonzero(near_axis & ~seen)
+        if k.size == 0:
+            continue
+        cam = np.einsum("nij,nj->ni", rotations[view], directions[k])
+        px = camera.project(cam)
+        inside = (px[:, 0] >= -0.5) & (px[:, 0] <= camera.width - 0.5) & (px[:, 1] >= -0.5) \
+            & (px[:, 1] <= camera.height - 0.5)
+        seen[k[inside]] = True
     return seen
 
 

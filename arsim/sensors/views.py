@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.gl import create_gl_context
 from arsim.core.resample import extend_beyond_rim, sample_anglemap
+from arsim.sensors.camera import RESPONSES, ResponseCurve, SensorSettings, vignette
 
 
 def pixel_rays(camera: CameraIntrinsics) -> np.ndarray:
@@ -31,6 +32,12 @@ def _shader(name: str) -> str:
     return resources.files("arsim.sensors").joinpath("shaders", name).read_text(encoding="utf-8")
 
 
+def _environment_program(ctx, fragment: str):
+    """A program of the full-screen triangle and a fragment shader that uses anglemap.glsl."""
+    source = "#version 430\n" + _shader("anglemap.glsl") + _shader(fragment)
+    return ctx.program(vertex_shader=_shader("fullscreen.vert"), fragment_shader=source)
+
+
 class EnvironmentRenderer:
     """Renders many views of one environment with moderngl; the probe texture is uploaded once."""
 
@@ -42,9 +49,9 @@ class EnvironmentRenderer:
         self.texture = self.ctx.texture((n, n), 3, extended.tobytes(), dtype="f4")
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False  # clamp to edge
-        self.program = self.ctx.program(vertex_shader=_shader("fullscreen.vert"),
-                                        fragment_shader=_shader("environment_view.frag"))
-        rays = np.ascontiguousarray(pixel_rays(camera)[::-1].astype(np.float32))  # GL rows run bottom-up
+        self.program = _environment_program(self.ctx, "environment_view.frag")
+        # Texture row y is image row y: the framebuffer then holds the image top row first, as read back.
+        rays = np.ascontiguousarray(pixel_rays(camera).astype(np.float32))
         self.rays = self.ctx.texture((camera.width, camera.height), 3, rays.tobytes(), dtype="f4")
         self.rays.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.vao = self.ctx.vertex_array(self.program, [])
@@ -54,17 +61,65 @@ class EnvironmentRenderer:
     def render(self, camera_to_world: Rotation) -> np.ndarray:
         """Radiance (H, W, 3) float32 of one view."""
         self.fbo.use()
-        self.texture.use(0)
-        self.rays.use(1)
-        self.program["probe"].value = 0
-        self.program["rays"].value = 1
-        # GLSL mat3 uniforms are column-major: pass the transpose of the row-major matrix.
-        self.program["camera_to_world"].write(camera_to_world.as_matrix().T.astype("f4").tobytes())
+        self._bind(self.program, camera_to_world)
         self.vao.render(mode=moderngl.TRIANGLES, vertices=3)
         data = np.frombuffer(self.fbo.read(components=4, dtype="f4"), dtype=np.float32)
-        image = data.reshape(self.camera.height, self.camera.width, 4)[::-1, :, :3]
-        return np.ascontiguousarray(image)
+        return np.ascontiguousarray(data.reshape(self.camera.height, self.camera.width, 4)[:, :, :3])
+
+    def _bind(self, program, camera_to_world: Rotation) -> None:
+        self.texture.use(0)
+        self.rays.use(1)
+        program["probe"].value = 0
+        program["rays"].value = 1
+        # GLSL mat3 uniforms are column-major: pass the transpose of the row-major matrix.
+        program["camera_to_world"].write(camera_to_world.as_matrix().T.astype("f4").tobytes())
 
     def release(self) -> None:
         for obj in (self.vao, self.program, self.fbo, self.target, self.texture, self.rays):
             obj.release()
+
+
+class CameraRenderer(EnvironmentRenderer):
+    """8-bit camera frames rendered in one GL pass: the view, the sensor noise (hashed, so the GPU draws
+    the same numbers as camera.pixel_normals), the gain and the response curve. camera.expose is its
+    NumPy reference; only the radiance lookup differs (bilinear filtering with 8-bit weights)."""
+
+    def __init__(self, probe: np.ndarray, camera: CameraIntrinsics, sensor: SensorSettings, response: ResponseCurve,
+                 ctx=None):
+        super().__init__(probe, camera, ctx)
+        self.sensor = sensor
+        self.frame_program = _environment_program(self.ctx, "camera_frame.frag")
+        falloff = vignette(camera.height, camera.width, sensor.vignetting).astype(np.float32)
+        self.falloff = self.ctx.texture((camera.width, camera.height), 1, falloff.tobytes(),
+                                        dtype="f4")
+        self.falloff.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        # The response curve: a float32 guess of the code, settled by the exact thresholds.
+        self.frame_program["thresholds"].write(response.thresholds_float32().astype("f4").tobytes())
+        self.frame_program["response_kind"].value = RESPONSES.index(response.kind)
+        self.frame_program["response_gamma"].value = response.gamma
+        self.frame_program["response_contrast"].value = response.contrast
+        self.frame_program["read_noise_var"].value = sensor.read_noise_e**2
+        self.frame_program["width"].value = camera.width
+        self.frame_vao = self.ctx.vertex_array(self.frame_program, [])
+        self.codes = self.ctx.texture((camera.width, camera.height), 4, dtype="u1")  # integer RGBA8UI
+        self.frame_fbo = self.ctx.framebuffer(color_attachments=[self.codes])
+
+    def capture(self, camera_to_world: Rotation, exposure_s: float, iso: float, key: int) -> np.ndarray:
+        """The 8-bit frame (H, W, 3) uint8 of one view; key: camera.noise_key of the frame."""
+        p, s = self.frame_program, self.sensor
+        self.frame_fbo.use()
+        self._bind(p, camera_to_world)
+        self.falloff.use(2)
+        p["falloff"].value = 2
+        # The same float32 constants as camera.expose.
+        p["electrons_per_radiance"].value = float(np.float32(exposure_s * s.sensitivity * s.full_well_e))
+        p["gain"].value = float(np.float32(iso / s.base_iso / s.full_well_e))
+        p["noise_key"].value = int(key)
+        self.frame_vao.render(mode=moderngl.TRIANGLES, vertices=3)
+        data = self.frame_fbo.read(components=3, dtype="u1", alignment=1)
+        return np.frombuffer(data, dtype=np.uint8).reshape(self.camera.height, self.camera.width, 3)
+
+    def release(self) -> None:
+        for obj in (self.frame_vao, self.frame_program, self.frame_fbo, self.codes, self.falloff):
+            obj.release()
+        super().release()

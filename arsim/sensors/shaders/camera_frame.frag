@@ -1,0 +1,56 @@
+// An 8-bit camera frame: the environment's radiance through the sensor model of camera.expose
+// (vignetting, shot and read noise, analog gain, clipping, response curve, quantisation).
+// camera.expose with camera.pixel_normals is its NumPy reference; the float32 operations are the
+// same and in the same order.
+
+uniform sampler2D falloff;          // vignetting per pixel, top row first like the rays
+uniform float electrons_per_radiance;
+uniform float read_noise_var;       // read noise squared, electrons^2
+uniform float gain;                 // iso / base_iso / full_well: electrons to relative exposure
+uniform uint noise_key;             // camera.noise_key(seed, stream, frame)
+uniform int width;
+uniform float thresholds[255];      // code c covers [t[c-1], t[c]) (float32, rounded up)
+uniform int response_kind;          // 0 srgb, 1 gamma, 2 s-curve (camera.ResponseCurve)
+uniform float response_gamma;
+uniform float response_contrast;
+
+out uvec4 code;
+
+uvec3 pcg_hash(uvec3 v) {
+    uvec3 state = v * 747796405u + 2891336453u;
+    uvec3 word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+vec3 unit_interval(uvec3 u) {  // (0, 1], exact in float32
+    return vec3((u >> 8u) + 1u) * (1.0 / 16777216.0);
+}
+
+vec3 response(vec3 x) {  // ResponseCurve.apply in float32: only a first guess of the code
+    if (response_kind == 1) return pow(x, vec3(1.0 / response_gamma));
+    vec3 y = mix(1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055, 12.92 * x, lessThanEqual(x, vec3(0.0031308)));
+    if (response_kind == 2) y = 0.5 + 0.5 * tanh(response_contrast * (y - 0.5)) / tanh(response_contrast / 2.0);
+    return y;
+}
+
+// The number of thresholds <= x, exactly as ResponseCurve.encode counts them: the curve in float32 is
+// off by far less than a code step, so the guess is the code or a neighbour, and the exact
+// (float32, rounded up) thresholds settle which.
+uint settle(float x, uint c) {
+    if (c > 0u && x < thresholds[c - 1u]) return c - 1u;
+    if (c < 255u && x >= thresholds[c]) return c + 1u;
+    return c;
+}
+
+void main() {
+    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    uvec3 n = (uint(pixel.y) * uint(width) + uint(pixel.x)) * 3u + uvec3(0u, 1u, 2u);  // sample index, channel fastest
+    vec3 electrons = max(pixel_radiance() * electrons_per_radiance * texelFetch(falloff, pixel, 0).r, 0.0);
+    vec3 u1 = unit_interval(pcg_hash(2u * n + noise_key));
+    vec3 u2 = unit_interval(pcg_hash(2u * n + 1u + noise_key));
+    vec3 normal = sqrt(-2.0 * log(u1)) * cos(2.0 * PI * u2);  // Box-Muller
+    vec3 e = electrons + normal * sqrt(electrons + read_noise_var);
+    vec3 signal = clamp(e * gain, 0.0, 1.0);
+    uvec3 guess = uvec3(clamp(round(255.0 * response(signal)), 0.0, 255.0));
+    code = uvec4(settle(signal.r, guess.r), settle(signal.g, guess.g), settle(signal.b, guess.b), 255u);
+}
