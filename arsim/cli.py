@@ -16,7 +16,7 @@ from arsim.core.image_stats import image_stats
 from arsim.core.progress import progress_bar
 from arsim.core.resample import LAYOUTS, detect_layout, to_layout
 from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_comparison
-from arsim.evaluate.recording_plots import plot_recording
+from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
 from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
@@ -111,12 +111,17 @@ def _recording_info(args: argparse.Namespace) -> int:
 def cmd_record(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     out = _output_dir(args.output)
-    with progress_bar("recording the capture sweep", 1.0) as update:
+    with progress_bar("recording the capture sweep and the AR path", 1.0) as update:
         summary = record(scenario, out, progress=lambda f: update(completed=f))
     plots = plot_recording(load_recording(out), out / "plots")
+    ar = ""
+    if summary.ar_frames:
+        ar_plot = plot_ar_path(load_recording(out / "ar"), out / "plots" / "ar_path.png")
+        ar = (f"; AR path: {summary.ar_frames} frames in {out / 'ar'}, the tag in view in "
+              f"{100 * ar_plot['tag_in_view']:.1f} % of them")
     print(f"wrote {summary.frames} frames and the IMU streams of a {summary.duration_s:.0f} s sweep to {out}; "
           f"{100 * plots['coverage']:.2f} % of the sphere seen; fused yaw error at the end "
-          f"{summary.final_yaw_error_deg:+.2f} degrees; plots in {out / 'plots'}")
+          f"{summary.final_yaw_error_deg:+.2f} degrees{ar}; plots in {out / 'plots'}")
     return 0
 
 

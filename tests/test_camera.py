@@ -29,7 +29,7 @@ def test_shot_noise_grows_with_the_square_root_of_the_signal():
     stds = []
     for k, level in enumerate((0.1, 0.4)):
         radiance = np.full((200, 200, 3), level / (sensor.sensitivity * 0.01))
-        normals = pixel_normals(noise_key(0, "frames", k), 200, 200)
+        normals = pixel_normals(noise_key(0, "capture", k), 200, 200)
         frame = expose(radiance, 0.01, sensor.base_iso, sensor, curve, normals).astype(float) / 255
         stds.append(frame.std())
         assert frame.mean() == pytest.approx(level, abs=0.004)
@@ -52,7 +52,7 @@ def test_auto_exposure_settles_within_its_configured_frames(dark, bright):
     for k in range(80):
         scene = np.full((48, 64, 3), dark if k < 40 else bright)
         used = ae.next_frame_settings()
-        frame = expose(scene, *used, sensor, curve, pixel_normals(noise_key(1, "frames", k), 48, 64), falloff)
+        frame = expose(scene, *used, sensor, curve, pixel_normals(noise_key(1, "capture", k), 48, 64), falloff)
         ae.update(frame, used)
         levels.append(metered_level(frame, curve))
         settings.append(used)
@@ -76,7 +76,7 @@ def test_auto_exposure_stays_within_limits_when_the_scene_is_too_dark():
     ae = AutoExposure(sensor, curve)
     for k in range(30):
         used = ae.next_frame_settings()
-        ae.update(expose(np.full((16, 16, 3), 1e-4), *used, sensor, curve, pixel_normals(noise_key(2, "frames", k), 16, 16)),
+        ae.update(expose(np.full((16, 16, 3), 1e-4), *used, sensor, curve, pixel_normals(noise_key(2, "capture", k), 16, 16)),
                   used)
     assert used == (sensor.exposure_range_s[1], sensor.iso_range[1])
 
@@ -99,11 +99,11 @@ def test_8_bit_encoding_equals_rounding_the_curve(kind, gamma):
 def test_hashed_pixel_normals_are_standard_normal_and_independent():
     from scipy import stats
 
-    a = pixel_normals(noise_key(0, "frames", 0), 240, 320).ravel()
-    b = pixel_normals(noise_key(0, "frames", 1), 240, 320).ravel()
+    a = pixel_normals(noise_key(0, "capture", 0), 240, 320).ravel()
+    b = pixel_normals(noise_key(0, "capture", 1), 240, 320).ravel()
     assert abs(a.mean()) < 0.01 and abs(a.std() - 1) < 0.01
     assert stats.kstest(a, "norm").pvalue > 1e-3  # the Box-Muller output is Gaussian
     assert abs(np.corrcoef(a, b)[0, 1]) < 0.01  # frames draw different noise
     assert abs(np.corrcoef(a[:-1], a[1:])[0, 1]) < 0.01  # neighbouring samples too
-    assert not np.array_equal(pixel_normals(noise_key(1, "frames", 0), 4, 4), pixel_normals(noise_key(0, "frames", 0), 4, 4))
-    assert noise_key(0, "frames", 3) != noise_key(0, "burst", 3)
+    assert not np.array_equal(pixel_normals(noise_key(1, "capture", 0), 4, 4), pixel_normals(noise_key(0, "capture", 0), 4, 4))
+    assert noise_key(0, "capture", 3) != noise_key(0, "burst", 3)

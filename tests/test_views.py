@@ -72,7 +72,7 @@ def test_gl_camera_frames_equal_the_numpy_sensor_model(renderer_and_probe, respo
     rotation = CaptureSweep().camera_orientation([17.0])[0]
     radiance = camera.render(rotation)
     for k, (exposure, iso) in enumerate([(1 / 30, 100.0), (1 / 500, 800.0), (1 / 8000, 50.0)]):
-        key = noise_key(4, "frames", k)
+        key = noise_key(4, "capture", k)
         gl = camera.capture(rotation, exposure, iso, key)
         ref = expose(radiance, exposure, iso, sensor, curve, pixel_normals(key, CAMERA.height, CAMERA.width),
                      vignette(CAMERA.height, CAMERA.width, sensor.vignetting))

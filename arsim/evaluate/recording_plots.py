@@ -127,3 +127,54 @@ def plot_recording(rec: Recording, out_dir: Path) -> dict:
         "coverage": coverage,
         "final_yaw_error_deg": final_yaw,
     }
+
+
+def tag_in_view(rec: Recording) -> np.ndarray:
+    """Per frame of an AR recording: whether all four corners of the tag project inside the image
+    (true pose; the tag faces up, so it is never seen from behind on this path)."""
+    cam = rec.meta["camera"]
+    camera = CameraIntrinsics(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"],
+                              cam.get("k1", 0.0), cam.get("k2", 0.0))
+    t_truth, positions, _ = rec.groundtruth
+    t_frames = np.array([f["t_ns"] for f in rec.frames])
+    nearest = np.clip(np.searchsorted(t_truth, t_frames), 0, len(t_truth) - 1)
+    views = frame_camera_orientations(rec)
+    corners = np.array(rec.meta["table"]["tag_corners_world"])
+    seen = np.zeros(len(t_frames), dtype=bool)
+    for k, (view, position) in enumerate(zip(views, positions[nearest])):
+        local = view.inv().apply(corners - position)
+        if np.all(local[:, 2] > 1e-6):
+            px = camera.project(local)
+            seen[k] = bool(np.all((px >= -0.5) & (px <= np.array([camera.width, camera.height]) - 0.5)))
+    return seen
+
+
+def plot_ar_path(rec: Recording, path: Path) -> dict:
+    """The AR path seen from above around the table and tag, and the tag's visibility and distance
+    over time."""
+    plt = _pyplot()
+    t_truth, positions, _ = rec.groundtruth
+    t_frames = np.array([f["t_ns"] for f in rec.frames])
+    nearest = np.clip(np.searchsorted(t_truth, t_frames), 0, len(t_truth) - 1)
+    seen = tag_in_view(rec)
+    table = rec.meta["table"]
+    fig, (top, timeline) = plt.subplots(1, 2, figsize=(11, 4.5), gridspec_kw={"width_ratios": [1, 1.6]})
+    w, d = table["size_m"]
+    top.add_patch(plt.Rectangle((-w / 2, -d / 2), w, d, color="peru", alpha=0.5, label="table"))
+    h = table["tag_size_m"] / 2
+    top.add_patch(plt.Rectangle((-h, -h), 2 * h, 2 * h, color="black", label="tag"))
+    p = positions[nearest]
+    top.scatter(p[:, 0], p[:, 2], c=np.where(seen, "tab:green", "tab:red"), s=4)
+    top.set_aspect("equal")
+    top.set_xlabel("world x (m)")
+    top.set_ylabel("world z (m)")
+    top.set_title("path from above (green: tag in view)")
+    t = t_frames / 1e9
+    timeline.plot(t, np.linalg.norm(p, axis=1), color="tab:blue", label="distance to the tag (m)")
+    timeline.fill_between(t, 0, 1, where=~seen, transform=timeline.get_xaxis_transform(), color="tab:red",
+                          alpha=0.2, label="tag out of view")
+    timeline.set_xlabel("time (s)")
+    timeline.set_ylabel("distance (m)")
+    timeline.legend(loc="upper right", fontsize=8)
+    timeline.set_title(f"AR path: the tag in view in {100 * seen.mean():.1f} % of the frames")
+    return {"file": _save(fig, path), "tag_in_view": float(seen.mean())}

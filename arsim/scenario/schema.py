@@ -48,8 +48,9 @@ def subsection(cls: type, *, help: str, array: bool = False, default: Any = None
     """Declare a nested table (`[a.b]`), or with array=True an array of tables (`[[a.b]]`).
 
     default: an instance of cls whose values stand for the keys a scenario leaves out, so that one
-    section class can serve several tables with different defaults (the IMU's three sensors)."""
-    factory = tuple if array else (cls if default is None else (lambda: default))
+    section class can serve several tables with different defaults (the IMU's three sensors); for an
+    array, a tuple of instances used when the scenario has no such array."""
+    factory = (lambda: default) if default is not None else (tuple if array else cls)
     return field(default_factory=factory, metadata={"help": help, "section": cls, "array": array, "default": default})
 
 

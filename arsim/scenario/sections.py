@@ -131,6 +131,37 @@ class CaptureSection:
 
 
 @dataclass(frozen=True)
+class LookAwaySection:
+    """[[ar.look_away]]: a time window in which the phone looks away from the tag (it is lost)."""
+
+    start_s: float = setting(8.0, min=0.0, max=3600.0, unit="s", help="when the view starts to swing away")
+    end_s: float = setting(11.0, min=0.0, max=3600.0, unit="s", help="when it is back on the tag")
+
+
+@dataclass(frozen=True)
+class ArSection:
+    """[ar]: the AR session's walk around the table, the printed AprilTag on it and the table itself.
+    World: the table top is y = 0, the tag lies centred at the origin, its x axis along world +x."""
+
+    enabled: bool = setting(True, help="record the AR path (into ar/ of the recording) after the sweep")
+    duration_s: float = setting(20.0, min=1.0, max=3600.0, unit="s", help="length of the AR path")
+    laps: float = setting(0.5, min=0.0, max=20.0, help="times around the tag")
+    near_m: float = setting(0.3, min=0.05, max=10.0, unit="m", help="closest distance to the tag")
+    far_m: float = setting(1.5, min=0.05, max=10.0, unit="m", help="farthest distance to the tag")
+    shake_deg: float = setting(0.5, min=0.0, max=10.0, unit="degrees", help="hand shake")
+    look_away: tuple[LookAwaySection, ...] = subsection(LookAwaySection, array=True, default=(LookAwaySection(),),
+                                                      help="windows in which the tag leaves the view")
+    tag_family: str = setting("tag36h11", choices=("tag36h11",), help="AprilTag family")
+    tag_id: int = setting(0, min=0, max=586, help="id of the printed tag (tag36h11 has 587)")
+    tag_size_m: float = setting(0.16, min=0.01, max=5.0, unit="m", help="side of the tag's black square")
+    tag_margin_cells: float = setting(1.0, min=0.0, max=10.0, help="white paper around the tag, in tag cells")
+    table_size_m: tuple[float, float] = setting((1.6, 1.0), min=0.05, max=100.0, unit="m",
+                                                help="table top along world x and z, centred on the tag")
+    table_albedo: tuple[float, float, float] = setting((0.30, 0.20, 0.12), min=0.0, max=1.0,
+                                                       help="diffuse reflectance of the table top (linear RGB)")
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A whole scenario: one field per TOML section, each a checked, frozen dataclass."""
 
@@ -138,3 +169,4 @@ class Scenario:
     environment: EnvironmentSection = subsection(EnvironmentSection, help="the true HDR environment")
     device: DeviceSection = subsection(DeviceSection, help="the phone's sensors")
     capture: CaptureSection = subsection(CaptureSection, help="the capture sweep")
+    ar: ArSection = subsection(ArSection, help="the AR session's path, tag and table")

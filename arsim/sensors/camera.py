@@ -152,7 +152,7 @@ def pcg_hash(v: np.ndarray) -> np.ndarray:
     return (word >> np.uint32(22)) ^ word
 
 
-NOISE_STREAMS = {"frames": 1, "burst": 2}
+NOISE_STREAMS = {"capture": 1, "burst": 2, "ar": 3}
 
 
 def noise_key(seed: int, stream: str, frame: int) -> int:

@@ -37,7 +37,8 @@ from arsim.scenario.environment import load_environment
 from arsim.sensors.camera import AutoExposure, ResponseCurve, SensorSettings, noise_key
 from arsim.sensors.fusion import mahony, yaw_error_deg
 from arsim.sensors.imu import SensorStream, sensor_model, simulate_imu
-from arsim.sensors.trajectory import CaptureSweep, camera_mount
+from arsim.sensors.table import Table
+from arsim.sensors.trajectory import ARPath, CaptureSweep, Trajectory, camera_mount
 from arsim.sensors.views import CameraRenderer
 
 FORMAT = "arsim-recording/1"
@@ -93,48 +94,97 @@ class RecordSummary:
     frames: int
     duration_s: float
     final_yaw_error_deg: float
+    ar_frames: int = 0
+
+
+def ar_path(scenario: Scenario) -> ARPath:
+    a = scenario.ar
+    if a.far_m < a.near_m:
+        raise ArsimError(f"[ar] far_m = {a.far_m} is below near_m = {a.near_m}: give near_m <= far_m")
+    for w in a.look_away:
+        if not w.start_s < w.end_s:
+            raise ArsimError(f"[[ar.look_away]] start_s = {w.start_s} is not before end_s = {w.end_s}")
+    return ARPath(a.duration_s, a.laps, a.near_m, a.far_m, a.shake_deg, tuple((w.start_s, w.end_s) for w in a.look_away))
+
+
+@dataclass(frozen=True)
+class _Segment:
+    """One stretch of a recording: a trajectory, what the camera sees along it, and its folder."""
+
+    name: str  # "capture" or "ar"; also the noise stream of its frames
+    trajectory: Trajectory
+    table: Table | None
+    imu_seed: int  # the IMU streams' generator key, distinct per segment
+    burst: bool
 
 
 def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] = lambda f: None) -> RecordSummary:
-    """Synthesise the capture sweep of a scenario into out_dir (created if missing). Deterministic:
+    """Synthesise the capture sweep of a scenario into out_dir (created if missing) and, when [ar] is
+    enabled, the AR path with the table and tag into out_dir/ar (a recording of its own). Deterministic:
     the same scenario and seed give byte-identical files."""
+    cam = scenario.device.camera
+    segments = [_Segment("capture", capture_sweep(scenario), None, 1, True)]
+    if scenario.ar.enabled:
+        segments.append(_Segment("ar", ar_path(scenario), Table.of(scenario.ar), 4, False))
+    counts = [int(math.floor(s.trajectory.duration * cam.fps)) + 1 for s in segments]
+    probe = load_environment(scenario.environment)
+    results = []
+    for k, segment in enumerate(segments):
+        done, total = sum(counts[:k]), sum(counts)
+        folder = out_dir if segment.name == "capture" else out_dir / segment.name
+        results.append(_record_segment(scenario, probe, segment, folder,
+                                       lambda f: progress((done + f * counts[k]) / total)))
+        if segment.name == "capture" and scenario.ar.enabled:
+            _add_to_meta(out_dir, {"ar_recording": "ar"})
+    yaw = results[0]
+    return RecordSummary(counts[0], segments[0].trajectory.duration, yaw, counts[1] if len(counts) > 1 else 0)
+
+
+def _add_to_meta(folder: Path, entries: dict) -> None:
+    meta = json.loads((folder / "meta.json").read_text())
+    write_text_atomic(folder / "meta.json", json.dumps(meta | entries, indent=2) + "\n")
+
+
+def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, out_dir: Path,
+                    progress: Callable[[float], None]) -> float:
+    """Write one segment's files; returns the fused yaw error at its end (degrees)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "frames").mkdir(exist_ok=True)
     seed = scenario.run.seed
-    sweep = capture_sweep(scenario)
+    trajectory = segment.trajectory
     camera = camera_intrinsics(scenario)
     cam = scenario.device.camera
     mount = camera_mount(scenario.device.camera_misalignment_deg)
     # Independent streams per purpose, so adding frames does not change the IMU and vice versa (the
     # camera's noise is hashed from seed, stream and frame index: camera.noise_key).
-    rng_imu = np.random.default_rng([seed, 1])
+    rng_imu = np.random.default_rng([seed, segment.imu_seed])
     device = scenario.device
-    streams = simulate_imu(sweep, rng_imu, sensor_model(device.gyroscope), sensor_model(device.accelerometer),
+    streams = simulate_imu(trajectory, rng_imu, sensor_model(device.gyroscope), sensor_model(device.accelerometer),
                            sensor_model(device.magnetometer))
-    t_fused, fused = mahony(streams, sweep.orientation([0.0])[0], scenario.capture.fusion)
-    truth = sweep.orientation(t_fused / 1e9)
+    t_fused, fused = mahony(streams, trajectory.orientation([0.0])[0], scenario.capture.fusion)
+    truth = trajectory.orientation(t_fused / 1e9)
 
-    probe = load_environment(scenario.environment)
     sensor = SensorSettings.of(cam)
     response = ResponseCurve(cam.response, cam.gamma, cam.contrast)
-    renderer = CameraRenderer(probe, camera, sensor, response)
+    renderer = CameraRenderer(probe, camera, sensor, response, table=segment.table)
     ae = AutoExposure(sensor, response)
-    burst_rows = _write_burst(out_dir, renderer, sweep.camera_orientation([0.0], mount)[0], scenario)
-    n_frames = int(math.floor(sweep.duration * cam.fps)) + 1
+    burst_rows = (_write_burst(out_dir, renderer, trajectory.camera_orientation([0.0], mount)[0], scenario)
+                  if segment.burst else [])
+    n_frames = int(math.floor(trajectory.duration * cam.fps)) + 1
     rows = []
-    views = sweep.camera_orientation(np.arange(n_frames) / cam.fps, mount)
+    times = np.arange(n_frames) / cam.fps
+    views, positions = trajectory.camera_orientation(times, mount), trajectory.position(times)
     with ThreadPoolExecutor(2) as writers:  # PNG encoding releases the GIL: overlap it with rendering
         pending: deque = deque()
         for k in range(n_frames):
-            t = k / cam.fps
             used = ae.next_frame_settings()
-            frame = renderer.capture(views[k], *used, noise_key(seed, "frames", k))
+            frame = renderer.capture(views[k], *used, noise_key(seed, segment.name, k), positions[k])
             ae.update(frame, used)
             name = f"{k:06d}.png"
             pending.append(writers.submit(_write_png, out_dir / "frames" / name, frame))
             while len(pending) > MAX_PENDING_FRAMES:  # bounded: frames waiting to be written hold memory
                 pending.popleft().result()
-            rows.append((int(round(t * 1e9)), int(round(used[0] * 1e9)), round(used[1], 3), f"frames/{name}"))
+            rows.append((int(round(times[k] * 1e9)), int(round(used[0] * 1e9)), round(used[1], 3), f"frames/{name}"))
             progress((k + 1) / n_frames)
         for future in pending:
             future.result()
@@ -149,23 +199,29 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
     write_text_atomic(out_dir / "imu.csv", _csv_formatted(["t_ns", "sensor", "x", "y", "z"], "%d,%s" + ",%.9f" * 3, imu))
     write_text_atomic(out_dir / "orientation.csv", _csv_formatted(
         ["t_ns", "qx", "qy", "qz", "qw"], "%d" + ",%.9f" * 4, zip(t_fused.tolist(), *fused.as_quat().T.tolist())))
-    positions = sweep.position(t_fused / 1e9)
+    device_positions = trajectory.position(t_fused / 1e9)
     write_text_atomic(out_dir / "groundtruth.csv", _csv_formatted(
         ["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"], "%d" + ",%.9f" * 7,
-        zip(t_fused.tolist(), *positions.T.tolist(), *truth.as_quat().T.tolist())))
+        zip(t_fused.tolist(), *device_positions.T.tolist(), *truth.as_quat().T.tolist())))
     meta = {
         "format": FORMAT,
         "arsim_version": __version__,
+        "segment": segment.name,
         "seed": seed,
-        "duration_s": sweep.duration,
+        "duration_s": trajectory.duration,
         "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy,
                    "cx": camera.cx, "cy": camera.cy, "k1": camera.k1, "k2": camera.k2, "fps": cam.fps},
         "camera_to_device": mount.as_matrix().tolist(),
         "fusion": scenario.capture.fusion,
         "scenario_toml": scenario_to_toml(scenario),
     }
+    if segment.table is not None:
+        t = segment.table
+        meta["table"] = {"tag_family": t.tag_family, "tag_id": t.tag_id, "tag_size_m": t.tag_size_m,
+                         "tag_corners_world": t.tag_corners_world().tolist(), "size_m": list(t.size_m),
+                         "albedo": list(t.albedo), "light": [float(v) for v in renderer.table_light]}
     write_text_atomic(out_dir / "meta.json", json.dumps(meta, indent=2) + "\n")
-    return RecordSummary(n_frames, sweep.duration, float(yaw_error_deg(fused[-1:], truth[-1:])[0]))
+    return float(yaw_error_deg(fused[-1:], truth[-1:])[0])
 
 
 # ----------------------------------------------------------------------------------------------------

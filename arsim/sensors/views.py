@@ -13,6 +13,7 @@ from arsim.core.conventions import CameraIntrinsics
 from arsim.core.gl import create_gl_context
 from arsim.core.resample import extend_beyond_rim, sample_anglemap
 from arsim.sensors.camera import RESPONSES, ResponseCurve, SensorSettings, vignette
+from arsim.sensors.table import Table, table_radiance_reference, upward_light
 
 
 def pixel_rays(camera: CameraIntrinsics) -> np.ndarray:
@@ -21,11 +22,25 @@ def pixel_rays(camera: CameraIntrinsics) -> np.ndarray:
     return camera.unproject(np.stack([u, v], axis=-1))
 
 
-def environment_view_reference(probe: np.ndarray, camera: CameraIntrinsics, camera_to_world: Rotation) -> np.ndarray:
-    """Radiance (H, W, 3) float64 of the angle-map environment seen by the camera (bilinear)."""
+def environment_view_reference(probe: np.ndarray, camera: CameraIntrinsics, camera_to_world: Rotation,
+                               position: np.ndarray | None = None, table: Table | None = None) -> np.ndarray:
+    """Radiance (H, W, 3) float64 of the angle-map environment seen by the camera (bilinear), and of
+    the table with its tag where the camera at `position` sees it."""
     rays = pixel_rays(camera)
     world = camera_to_world.apply(rays.reshape(-1, 3)).reshape(rays.shape)
-    return sample_anglemap(probe, world)
+    image = sample_anglemap(probe, world)
+    if table is None:
+        return image
+    d = world.reshape(-1, 3)
+    position = np.asarray(position, dtype=np.float64)
+    down = (d[:, 1] < 0) & (position[1] > 0)
+    t = np.where(down, -position[1] / np.where(down, d[:, 1], -1.0), 0.0)
+    hits = position[[0, 2]] + t[:, None] * d[:, [0, 2]]
+    surface = table_radiance_reference(table, upward_light(probe), hits)
+    seen = down & np.isfinite(surface[:, 0])
+    flat = image.reshape(-1, 3)
+    flat[seen] = surface[seen]
+    return image
 
 
 def _shader(name: str) -> str:
@@ -41,9 +56,16 @@ def _environment_program(ctx, fragment: str):
 class EnvironmentRenderer:
     """Renders many views of one environment with moderngl; the probe texture is uploaded once."""
 
-    def __init__(self, probe: np.ndarray, camera: CameraIntrinsics, ctx=None):
+    def __init__(self, probe: np.ndarray, camera: CameraIntrinsics, ctx=None, table: Table | None = None):
         self.ctx = ctx or create_gl_context()
         self.camera = camera
+        self.table = table
+        self.table_light = upward_light(probe) if table is not None else np.zeros(3)
+        sheet = table.paper_image if table is not None else np.zeros((1, 1), np.float32)
+        self.paper = self.ctx.texture(sheet.shape[::-1], 1, np.ascontiguousarray(sheet).tobytes(), dtype="f4")
+        self.paper.build_mipmaps()
+        self.paper.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.paper.repeat_x = self.paper.repeat_y = False
         extended = np.ascontiguousarray(extend_beyond_rim(probe).astype(np.float32))
         n = probe.shape[0]
         self.texture = self.ctx.texture((n, n), 3, extended.tobytes(), dtype="f4")
@@ -58,24 +80,35 @@ class EnvironmentRenderer:
         self.target = self.ctx.texture((camera.width, camera.height), 4, dtype="f4")
         self.fbo = self.ctx.framebuffer(color_attachments=[self.target])
 
-    def render(self, camera_to_world: Rotation) -> np.ndarray:
-        """Radiance (H, W, 3) float32 of one view."""
+    def render(self, camera_to_world: Rotation, position: np.ndarray | None = None) -> np.ndarray:
+        """Radiance (H, W, 3) float32 of one view (from `position`, which matters for the table only)."""
         self.fbo.use()
-        self._bind(self.program, camera_to_world)
+        self._bind(self.program, camera_to_world, position)
         self.vao.render(mode=moderngl.TRIANGLES, vertices=3)
         data = np.frombuffer(self.fbo.read(components=4, dtype="f4"), dtype=np.float32)
         return np.ascontiguousarray(data.reshape(self.camera.height, self.camera.width, 4)[:, :, :3])
 
-    def _bind(self, program, camera_to_world: Rotation) -> None:
+    def _bind(self, program, camera_to_world: Rotation, position: np.ndarray | None) -> None:
         self.texture.use(0)
         self.rays.use(1)
+        self.paper.use(5)
         program["probe"].value = 0
         program["rays"].value = 1
+        program["table_enabled"].value = self.table is not None
+        if self.table is not None:
+            if position is None:
+                raise ValueError("a view of the table needs the camera position")
+            program["paper"].value = 5
+            program["camera_position"].value = tuple(float(v) for v in position)
+            program["table_half"].value = tuple(v / 2 for v in self.table.size_m)
+            program["table_albedo"].value = tuple(self.table.albedo)
+            program["table_light"].value = tuple(float(v) for v in self.table_light)
+            program["paper_half"].value = self.table.paper_half_m
         # GLSL mat3 uniforms are column-major: pass the transpose of the row-major matrix.
         program["camera_to_world"].write(camera_to_world.as_matrix().T.astype("f4").tobytes())
 
     def release(self) -> None:
-        for obj in (self.vao, self.program, self.fbo, self.target, self.texture, self.rays):
+        for obj in (self.vao, self.program, self.fbo, self.target, self.texture, self.rays, self.paper):
             obj.release()
 
 
@@ -85,8 +118,8 @@ class CameraRenderer(EnvironmentRenderer):
     NumPy reference; only the radiance lookup differs (bilinear filtering with 8-bit weights)."""
 
     def __init__(self, probe: np.ndarray, camera: CameraIntrinsics, sensor: SensorSettings, response: ResponseCurve,
-                 ctx=None):
-        super().__init__(probe, camera, ctx)
+                 ctx=None, table: Table | None = None):
+        super().__init__(probe, camera, ctx, table)
         self.sensor = sensor
         self.frame_program = _environment_program(self.ctx, "camera_frame.frag")
         falloff = vignette(camera.height, camera.width, sensor.vignetting).astype(np.float32)
@@ -104,11 +137,12 @@ class CameraRenderer(EnvironmentRenderer):
         self.codes = self.ctx.texture((camera.width, camera.height), 4, dtype="u1")  # integer RGBA8UI
         self.frame_fbo = self.ctx.framebuffer(color_attachments=[self.codes])
 
-    def capture(self, camera_to_world: Rotation, exposure_s: float, iso: float, key: int) -> np.ndarray:
+    def capture(self, camera_to_world: Rotation, exposure_s: float, iso: float, key: int,
+                position: np.ndarray | None = None) -> np.ndarray:
         """The 8-bit frame (H, W, 3) uint8 of one view; key: camera.noise_key of the frame."""
         p, s = self.frame_program, self.sensor
         self.frame_fbo.use()
-        self._bind(p, camera_to_world)
+        self._bind(p, camera_to_world, position)
         self.falloff.use(2)
         p["falloff"].value = 2
         # The same float32 constants as camera.expose.

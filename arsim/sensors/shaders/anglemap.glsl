@@ -5,6 +5,15 @@ uniform sampler2D probe;        // angle map, row 0 of the image uploaded first 
 uniform sampler2D rays;         // per pixel, its unit ray in OpenCV camera axes (lens distortion included)
 uniform mat3 camera_to_world;   // OpenCV camera axes (x right, y down, z forward) to world
 
+// The table top (y = 0) with the printed tag (sensors/table.py), for views along the AR path.
+uniform bool table_enabled;
+uniform vec3 camera_position;   // world, metres
+uniform vec2 table_half;        // half its size along x and z
+uniform vec3 table_albedo;
+uniform vec3 table_light;       // M_1(+y) of the environment: radiance of a white matte surface facing up
+uniform float paper_half;       // half the side of the printed sheet
+uniform sampler2D paper;        // its reflectance, row 0 towards world -z (mipmapped)
+
 const float PI = 3.14159265358979;
 
 // Thesis Alg. 2.2 (angle-map coordinates of a direction) with its guard: the azimuth is undefined
@@ -23,6 +32,20 @@ vec2 anglemap_st(vec3 d) {
 // of the probe is the angle map's top row, at t = 1.
 vec3 pixel_radiance() {
     vec3 ray = texelFetch(rays, ivec2(gl_FragCoord.xy), 0).xyz;
-    vec2 st = anglemap_st(camera_to_world * ray);
+    vec3 d = camera_to_world * ray;
+    if (table_enabled) {
+        // Where the ray meets y = 0 (computed for every pixel, so that the texture derivatives that
+        // pick the mip level are defined everywhere; rays that go up get a far-away dummy point).
+        bool down = d.y < 0.0 && camera_position.y > 0.0;
+        float t = down ? -camera_position.y / d.y : 0.0;
+        vec2 hit = camera_position.xz + t * d.xz;
+        vec2 uv = hit / (2.0 * paper_half) + 0.5;  // u along +x, v along +z (image rows)
+        vec3 sheet = vec3(textureGrad(paper, uv, dFdx(uv), dFdy(uv)).r);
+        if (down && all(lessThanEqual(abs(hit), table_half))) {
+            bool on_paper = all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)));
+            return (on_paper ? sheet : table_albedo) * table_light;
+        }
+    }
+    vec2 st = anglemap_st(d);
     return texture(probe, vec2(st.x, 1.0 - st.y)).rgb;
 }
