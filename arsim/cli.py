@@ -20,7 +20,7 @@ from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
 from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
-from arsim.sensors.recording import load_recording, record
+from arsim.sensors.recording import load_recording, record, recording_segments
 
 MAX_SIZE = 16384
 
@@ -110,6 +110,7 @@ def _recording_info(args: argparse.Namespace) -> int:
 
 def cmd_record(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
+    recording_segments(scenario)  # settings that do not fit together stop here, before any output
     out = _output_dir(args.output)
     with progress_bar("recording the capture sweep and the AR path", 1.0) as update:
         summary = record(scenario, out, progress=lambda f: update(completed=f))

@@ -20,6 +20,8 @@ duration_s = 2.0
 [device.camera]
 width = 96
 height = 72
+[ar]
+duration_s = 2.0
 """
 
 
@@ -55,6 +57,10 @@ def test_a_recording_reads_back_consistently(recordings):
     assert np.array_equal(t_truth, t_fused) and np.abs(positions).max() < 0.1
     exposures = np.array([f["exposure_ns"] for f in rec.frames]) / 1e9
     assert exposures.min() >= 1e-5 and exposures.max() <= 1 / 30 + 1e-9
+    assert rec.meta["ar_recording"] == "ar" and rec.meta["segment"] == "capture"
+    ar = load_recording(recordings["a"] / "ar")  # the AR path is a recording of its own
+    assert ar.meta["segment"] == "ar" and len(ar.frames) == 61 and ar.burst == []
+    assert ar.meta["table"]["tag_id"] == 0 and len(ar.meta["table"]["tag_corners_world"]) == 4
 
 
 def test_damaged_recordings_are_explained(recordings, tmp_path):
@@ -98,6 +104,9 @@ def test_damaged_recordings_are_explained(recordings, tmp_path):
 @pytest.mark.parametrize("toml, fragments", [
     ("[device.gyroscope]\nnoise_densty = 1e-4\n", ["unknown key 'noise_densty'", "did you mean 'noise_density'"]),
     ("[device.accelerometer]\nnoise_density = -1.0\n", ["noise_density = -1.0 is out of range"]),
+    ("[ar]\nnear_m = 2.0\nfar_m = 1.0\n", ["far_m = 1.0 is below near_m = 2.0"]),
+    ("[[ar.look_away]]\nstart_s = 5.0\nend_s = 4.0\n", ["start_s = 5.0 is not before end_s = 4.0"]),
+    ("[ar]\ntag_id = 600\n", ["tag_id = 600 is out of range"]),
     ("[device.camera]\nhfov_deg = 180.0\n", ["hfov_deg = 180.0 is out of range", "179"]),
     ("[device.camera]\nfps = 0\n", ["fps = 0 is out of range"]),
     ("[device.sonar]\nrate_hz = 10.0\n", ["unknown key 'sonar'"]),
@@ -131,3 +140,29 @@ def test_the_bracketed_burst_brightens_with_exposure(recordings):
     assert exposures[-1] / exposures[0] == pytest.approx(2.0**6, rel=1e-6)
     means = [cv2.imread(str(recordings["a"] / b["file"])).mean() for b in rec.burst]
     assert all(a < b for a, b in zip(means, means[1:]))
+
+
+def test_the_ar_path_shows_the_tag_where_the_truth_says(tmp_path):
+    """OpenCV finds the printed tag in the rendered AR frames whenever its corners are in the image,
+    and not while the phone looks away."""
+    import cv2
+
+    from arsim.evaluate.recording_plots import tag_in_view
+
+    scenario = tmp_path / "ar.toml"
+    scenario.write_text('[run]\nseed = 3\n[environment]\nmap = "envmaps/courtyard.exr"\nprobe_size = 128\n'
+                        "[capture]\nduration_s = 1.0\n[device.camera]\nwidth = 320\nheight = 240\nfps = 10.0\n"
+                        "[ar]\nduration_s = 10.0\ntag_id = 7\n[[ar.look_away]]\nstart_s = 4.0\nend_s = 7.0\n")
+    r = arsim("record", scenario, "-o", tmp_path / "rec")
+    assert r.returncode == 0, r.stderr
+    assert "tag in view" in r.stdout and (tmp_path / "rec" / "plots" / "ar_path.png").exists()
+    rec = load_recording(tmp_path / "rec" / "ar")
+    seen = tag_in_view(rec)
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11))
+    found = []
+    for frame in rec.frames:
+        _, ids, _ = detector.detectMarkers(cv2.imread(str(rec.folder / frame["file"]), cv2.IMREAD_GRAYSCALE))
+        found.append(ids is not None and 7 in ids.ravel())
+    found = np.array(found)
+    assert 0.2 < (~seen).mean() < 0.6  # the look-away window hides it for a while
+    assert found[seen].mean() >= 0.9 and not found[~seen].any()

@@ -80,3 +80,27 @@ def test_gl_camera_frames_equal_the_numpy_sensor_model(renderer_and_probe, respo
         assert diff.max() <= 1 and np.mean(diff > 0) <= 1e-4
         assert 5 < ref.mean() < 250 or k == 2  # the settings span dark to bright frames
     camera.release()
+
+
+def test_gl_view_of_the_table_and_tag_matches_the_reference(renderer_and_probe):
+    """Along the AR path the table and the printed tag appear where the NumPy ray cast puts them.
+    Stated tolerance: mean relative difference below 1 %; at most 2 % of the pixels (the table's and
+    the sheet's edges, where GL filters the tag's mip chain and the reference does not) differ by more
+    than 1 %."""
+    from arsim.sensors.table import Table
+    from arsim.sensors.trajectory import ARPath, camera_mount
+
+    _, probe = renderer_and_probe
+    table = Table(tag_id=3)
+    camera = CameraIntrinsics.from_fov(640, 480, 60.0)  # fine enough that the tag's texels are magnified
+    renderer = EnvironmentRenderer(probe, camera, table=table)
+    path, mount = ARPath(duration=20.0, laps=0.5, look_away=((8.0, 11.0),)), camera_mount((0.0, 0.0, 0.0))
+    for t in (0.0, 4.0, 16.0):
+        rotation, position = path.camera_orientation([t], mount)[0], path.position([t])[0]
+        gl = renderer.render(rotation, position)
+        ref = environment_view_reference(probe, camera, rotation, position, table)
+        rel = np.abs(gl - ref) / (ref + 1e-3 * ref.mean())
+        assert rel.mean() < 1e-2 and np.mean(rel > 1e-2) < 0.02
+        sheet = np.isclose(ref[..., 0] / renderer.table_light[0], 0.8, atol=1e-6)  # white paper pixels
+        assert sheet.sum() > 20  # the tag is in view at these times
+    renderer.release()

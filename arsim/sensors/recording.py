@@ -118,14 +118,22 @@ class _Segment:
     burst: bool
 
 
+def recording_segments(scenario: Scenario) -> list[_Segment]:
+    """What `record` will write; raises ArsimError for settings that do not fit together (call it
+    before creating any output)."""
+    SensorSettings.of(scenario.device.camera).check()
+    segments = [_Segment("capture", capture_sweep(scenario), None, 1, True)]
+    if scenario.ar.enabled:
+        segments.append(_Segment("ar", ar_path(scenario), Table.of(scenario.ar), 4, False))
+    return segments
+
+
 def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] = lambda f: None) -> RecordSummary:
     """Synthesise the capture sweep of a scenario into out_dir (created if missing) and, when [ar] is
     enabled, the AR path with the table and tag into out_dir/ar (a recording of its own). Deterministic:
     the same scenario and seed give byte-identical files."""
     cam = scenario.device.camera
-    segments = [_Segment("capture", capture_sweep(scenario), None, 1, True)]
-    if scenario.ar.enabled:
-        segments.append(_Segment("ar", ar_path(scenario), Table.of(scenario.ar), 4, False))
+    segments = recording_segments(scenario)
     counts = [int(math.floor(s.trajectory.duration * cam.fps)) + 1 for s in segments]
     probe = load_environment(scenario.environment)
     results = []
