@@ -1,0 +1,45 @@
+"""Time `arsim record` of the capture sweep (prints figures; not a test).
+
+    python benchmarks/bench_record.py [--scenario FILE] [--with-ar] [--repeat 2]
+
+Runs the command line as a user would (plots included) in a fresh process per run, on the default
+scenario with the AR path switched off unless --with-ar: the sweep is 60 s at 30 fps, 640 x 480.
+"""
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenario", type=Path, help="scenario file (default: the embedded default)")
+    parser.add_argument("--with-ar", action="store_true", help="keep the AR path the scenario asks for")
+    parser.add_argument("--repeat", type=int, default=2)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        scenario = args.scenario
+        if not args.with_ar:
+            text = scenario.read_text() if scenario else ""
+            scenario = Path(tmp) / "sweep.toml"
+            scenario.write_text(text + ("\n[ar]\nenabled = false\n" if "[ar]" not in text else ""))
+            if "[ar]" in text:
+                sys.exit("--scenario has an [ar] section: set enabled = false in it, or pass --with-ar")
+        for k in range(args.repeat):
+            out = Path(tmp) / f"rec{k}"
+            command = [sys.executable, "-m", "arsim.cli", "record", "-o", str(out)] + ([str(scenario)] if scenario else [])
+            start = time.perf_counter()
+            done = subprocess.run(command, capture_output=True, text=True)
+            seconds = time.perf_counter() - start
+            if done.returncode:
+                sys.exit(done.stderr)
+            frames = len(list((out / "frames").glob("*.png")))
+            print(f"run {k + 1}: {seconds:.1f} s for {frames} frames ({1000 * seconds / frames:.1f} ms per frame, "
+                  f"everything included)")
+
+
+if __name__ == "__main__":
+    main()
