@@ -320,7 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="orders of the SH error-against-order study (default " + ",".join(map(str, DEFAULT_SH_ORDERS)) + "; empty to skip)")
     p.set_defaults(run=cmd_compare_methods)
 
-    p = _command(sub, "record", "synthesise the capture sweep of a scenario: frames, IMU streams, fused orientation, truth",
+    p = _command(sub, "record", "synthesise the capture sweep of a scenario (frames, IMU streams, fused orientation, truth) and, "
+                 "unless [ar] enabled = false, the AR path around the table and tag into DIR/ar",
                  "arsim record scenarios/indoor.toml -o rec")
     p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help="scenario .toml (default: the embedded default scenario)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="recording folder (created if missing)")
