@@ -127,3 +127,14 @@ def test_ar_path_circles_the_marker_and_loses_it_only_when_looking_away():
     away = (t > start) & (t < end)
     assert visible[~away].all()
     assert not visible[(t > start + 1) & (t < end - 1)].any()
+
+
+def test_gauss_markov_recursion_equals_scipys_filter():
+    from scipy.signal import lfilter
+
+    from arsim.sensors.imu import _first_order_recursion
+
+    rng = np.random.default_rng(4)
+    drive, state, phi = rng.standard_normal((5000, 3)), rng.standard_normal(3), 0.999
+    expected, _ = lfilter([1.0], [1.0, -phi], drive, axis=0, zi=(phi * state)[None, :])
+    np.testing.assert_allclose(_first_order_recursion(drive, phi, state), expected, rtol=1e-12, atol=1e-12)

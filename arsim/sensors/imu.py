@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
-from scipy.signal import lfilter
+import numba
 
 from arsim.core.errors import ArsimError
 from arsim.scenario import sections
@@ -92,7 +92,18 @@ def _gauss_markov(n: int, dt: float, sigma: float, tau: float, rng: np.random.Ge
     phi = np.exp(-dt / tau)
     drive = rng.standard_normal((n, 3)) * sigma * np.sqrt(1.0 - phi * phi)
     state = rng.standard_normal(3) * sigma
-    out, _ = lfilter([1.0], [1.0, -phi], drive, axis=0, zi=(phi * state)[None, :])  # x_k = phi x_k-1 + drive_k
+    return _first_order_recursion(drive, phi, state)
+
+
+@numba.njit(cache=True)
+def _first_order_recursion(drive: np.ndarray, phi: float, state: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """x_k = phi x_(k-1) + drive_k from x_(-1) = state, per column: scipy.signal.lfilter([1], [1, -phi])
+    does the same (the tests compare them), but importing scipy.signal costs every command a second."""
+    out = np.empty_like(drive)
+    x = state.copy()
+    for k in range(drive.shape[0]):
+        x = phi * x + drive[k]
+        out[k] = x
     return out
 
 
