@@ -92,7 +92,12 @@ def _recording_info(args: argparse.Namespace) -> int:
         "camera": rec.meta["camera"],
         "imu_samples": {name: len(stream.t_ns) for name, stream in rec.imu.items()},
         "fusion": rec.meta["fusion"],
+        "segment": rec.meta.get("segment", "capture"),
     }
+    if "table" in rec.meta:
+        summary["tag"] = {k: rec.meta["table"][k] for k in ("tag_family", "tag_id", "tag_size_m")}
+    if "ar_recording" in rec.meta:
+        summary["ar_recording"] = str(Path(args.file) / rec.meta["ar_recording"])
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
@@ -101,6 +106,10 @@ def _recording_info(args: argparse.Namespace) -> int:
     print(f"{'duration':<12} {summary['duration_s']:.1f} s, {summary['frames']} frames of {cam['width']} x {cam['height']} at {cam['fps']:g} fps")
     print(f"{'IMU':<12} " + ", ".join(f"{name} {n}" for name, n in summary["imu_samples"].items()) + " samples")
     print(f"{'fusion':<12} {summary['fusion']}")
+    print(f"{'segment':<12} {summary['segment']}" + (f" (the AR path is in {summary['ar_recording']})" if "ar_recording" in summary else ""))
+    if "tag" in summary:
+        tag = summary["tag"]
+        print(f"{'tag':<12} {tag['tag_family']} id {tag['tag_id']}, {1000 * tag['tag_size_m']:g} mm, on the table at the origin")
     return 0
 
 

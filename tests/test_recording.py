@@ -63,6 +63,15 @@ def test_a_recording_reads_back_consistently(recordings):
     assert ar.meta["table"]["tag_id"] == 0 and len(ar.meta["table"]["tag_corners_world"]) == 4
 
 
+def test_info_describes_both_segments(recordings):
+    import json
+
+    top = json.loads(arsim("info", recordings["a"], "--json").stdout)
+    assert top["segment"] == "capture" and top["ar_recording"].endswith("ar") and top["frames"] == 61
+    ar = arsim("info", recordings["a"] / "ar")
+    assert ar.returncode == 0 and "tag36h11 id 0, 160 mm" in ar.stdout
+
+
 def test_damaged_recordings_are_explained(recordings, tmp_path):
     import shutil
 
