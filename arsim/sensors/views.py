@@ -1,5 +1,7 @@
-"""What the camera sees of the environment: radiance images of the angle map through a pinhole camera,
-rendered with moderngl (as the phone's GPU would) and with a NumPy reference that tests hold it to."""
+"""What the camera sees: radiance views of the environment (an angle map at infinity) and, along the AR
+path, of the table with its printed tag, through the OpenCV camera; and 8-bit camera frames of them
+with the sensor model applied in the same pass. Rendered with moderngl (as the phone's GPU would), with
+NumPy references the tests hold them to (environment_view_reference, camera.expose)."""
 
 from __future__ import annotations
 
@@ -53,8 +55,8 @@ def _with_alpha(image: np.ndarray) -> np.ndarray:
 
 
 def _environment_program(ctx, fragment: str):
-    """A program of the full-screen triangle and a fragment shader that uses anglemap.glsl."""
-    source = "#version 430\n" + _shader("anglemap.glsl") + _shader(fragment)
+    """A program of the full-screen triangle and a fragment shader that uses scene.glsl."""
+    source = "#version 430\n" + _shader("scene.glsl") + _shader(fragment)
     return ctx.program(vertex_shader=_shader("fullscreen.vert"), fragment_shader=source)
 
 

@@ -1,4 +1,5 @@
-// Shared by the environment shaders (prepended after the #version line).
+// The scene a pixel sees: the environment and, along the AR path, the table with its printed tag.
+// Shared by the view and camera-frame shaders (prepended after the #version line).
 // The environment is an angle map extended past its rim (so bilinear lookups near -z stay inside).
 
 uniform sampler2D probe;        // angle map, row 0 of the image uploaded first (t = 1 at the top)
