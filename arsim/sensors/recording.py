@@ -9,6 +9,8 @@ A recording folder holds:
   imu.csv            t_ns, sensor, x, y, z   (gyroscope rad/s, accelerometer m/s², magnetometer µT)
   orientation.csv    t_ns, qx, qy, qz, qw    (the fused device-to-world orientation the app reads)
   groundtruth.csv    t_ns, px, py, pz, qx, qy, qz, qw  (true device pose at every gyroscope sample)
+  ar/                the AR path ([ar] enabled): a recording of its own in the same layout (no burst),
+                     its meta.json adding the table, the tag and its world corners
 """
 
 from __future__ import annotations
