@@ -17,6 +17,39 @@ import numpy as np
 RING_BLOCK = 128
 
 
+@numba.njit(cache=True)
+def _interleaved(order):  # pragma: no cover (compiled)
+    """0, order-1, 1, order-2, ...: the m values in an order that gives each half of a static split of
+    the prange equal work (the work of m falls with m)."""
+    perm = np.empty(order, dtype=np.int64)
+    lo, hi = 0, order - 1
+    for k in range(order):
+        if k % 2 == 0:
+            perm[k] = lo
+            lo += 1
+        else:
+            perm[k] = hi
+            hi -= 1
+    return perm
+
+
+@numba.njit(cache=True)
+def _recurrence(m, order):  # pragma: no cover (compiled)
+    """For l = m..order-1 (index l - m): the factors a, ab of P~_lm = a x P~_(l-1)m - ab P~_(l-2)m; and the
+    constants of P~_mm = pmm_factor (-sin theta)^m and P~_(m+1)m = start1 x P~_mm."""
+    n_l = order - m
+    ca = np.zeros(n_l)
+    cab = np.zeros(n_l)
+    for j in range(2, n_l):
+        l = m + j
+        ca[j] = math.sqrt((4.0 * l * l - 1.0) / (l * l - m * m))
+        cab[j] = ca[j] * math.sqrt(((l - 1.0) ** 2 - m * m) / (4.0 * (l - 1.0) ** 2 - 1.0))
+    pmm_factor = 1.0 / math.sqrt(4.0 * math.pi)  # Condon-Shortley phase in the (-sin theta)^m
+    for q in range(1, m + 1):
+        pmm_factor *= math.sqrt((2.0 * q + 1.0) / (2.0 * q))
+    return ca, cab, pmm_factor, math.sqrt(2.0 * m + 3.0)
+
+
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def project_rings(cos_theta, sin_theta, ring_of_orbit, alpha, partial, order):  # pragma: no cover (compiled)
     """(order, order, 2C) array: [m, l] holds sum over rings of P~_lm(theta_r) S_m(r), real and imaginary
@@ -26,16 +59,7 @@ def project_rings(cos_theta, sin_theta, ring_of_orbit, alpha, partial, order):  
     n_orbits = alpha.size
     channels = partial.shape[3]
     out = np.zeros((order, order, 2 * channels))
-    perm = np.empty(order, dtype=np.int64)  # 0, order-1, 1, order-2, ...: equal work in each half
-    lo, hi = 0, order - 1
-    for k in range(order):
-        if k % 2 == 0:
-            perm[k] = lo
-            lo += 1
-        else:
-            perm[k] = hi
-            hi -= 1
-    inv_sqrt_4pi = 1.0 / math.sqrt(4.0 * math.pi)
+    perm = _interleaved(order)
     for k in numba.prange(order):
         m = perm[k]
         r4 = m % 4
@@ -50,16 +74,7 @@ def project_rings(cos_theta, sin_theta, ring_of_orbit, alpha, partial, order):  
                 sums[2 * ch, r] += c * (a.real + b.real) - s * (a.imag - b.imag)  # z a + conj(z) b
                 sums[2 * ch + 1, r] += c * (a.imag + b.imag) + s * (a.real - b.real)
         n_l = order - m
-        ca = np.zeros(n_l)
-        cab = np.zeros(n_l)
-        for j in range(2, n_l):
-            l = m + j
-            ca[j] = math.sqrt((4.0 * l * l - 1.0) / (l * l - m * m))
-            cab[j] = ca[j] * math.sqrt(((l - 1.0) ** 2 - m * m) / (4.0 * (l - 1.0) ** 2 - 1.0))
-        pmm_factor = inv_sqrt_4pi  # P~_mm = pmm_factor (-sin theta)^m, Condon-Shortley phase included
-        for q in range(1, m + 1):
-            pmm_factor *= math.sqrt((2.0 * q + 1.0) / (2.0 * q))
-        start1 = math.sqrt(2.0 * m + 3.0)
+        ca, cab, pmm_factor, start1 = _recurrence(m, order)
         acc = np.zeros((n_l, 2 * channels))
         p0 = np.empty(RING_BLOCK)
         p1 = np.empty(RING_BLOCK)
@@ -109,29 +124,11 @@ def synthesise_rings(cos_theta, sin_theta, weighted, n_freq):  # pragma: no cove
     n_q = weighted.shape[2]
     n_rings = cos_theta.size
     out = np.zeros((n_q, n_rings, n_freq), dtype=np.complex128)
-    perm = np.empty(order, dtype=np.int64)
-    lo, hi = 0, order - 1
-    for k in range(order):
-        if k % 2 == 0:
-            perm[k] = lo
-            lo += 1
-        else:
-            perm[k] = hi
-            hi -= 1
-    inv_sqrt_4pi = 1.0 / math.sqrt(4.0 * math.pi)
+    perm = _interleaved(order)
     for k in numba.prange(order):
         m = perm[k]
         n_l = order - m
-        ca = np.zeros(n_l)
-        cab = np.zeros(n_l)
-        for j in range(2, n_l):
-            l = m + j
-            ca[j] = math.sqrt((4.0 * l * l - 1.0) / (l * l - m * m))
-            cab[j] = ca[j] * math.sqrt(((l - 1.0) ** 2 - m * m) / (4.0 * (l - 1.0) ** 2 - 1.0))
-        pmm_factor = inv_sqrt_4pi
-        for q in range(1, m + 1):
-            pmm_factor *= math.sqrt((2.0 * q + 1.0) / (2.0 * q))
-        start1 = math.sqrt(2.0 * m + 3.0)
+        ca, cab, pmm_factor, start1 = _recurrence(m, order)
         for r in range(n_rings):
             x = cos_theta[r]
             p0 = pmm_factor * (-sin_theta[r]) ** m
