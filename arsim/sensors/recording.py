@@ -25,7 +25,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -99,6 +98,11 @@ class RecordSummary:
     ar_frames: int = 0
 
 
+def frame_count(trajectory: Trajectory, fps: float) -> int:
+    """Frames at t = 0, 1/fps, ... up to the trajectory's end."""
+    return int(math.floor(trajectory.duration * fps)) + 1
+
+
 def ar_path(scenario: Scenario) -> ARPath:
     a = scenario.ar
     if a.far_m < a.near_m:
@@ -111,22 +115,23 @@ def ar_path(scenario: Scenario) -> ARPath:
 
 @dataclass(frozen=True)
 class _Segment:
-    """One stretch of a recording: a trajectory, what the camera sees along it, and its folder."""
+    """One stretch of a recording: a trajectory, what the camera sees along it, where it is written."""
 
     name: str  # "capture" or "ar"; also the noise stream of its frames
     trajectory: Trajectory
     table: Table | None
     imu_seed: int  # the IMU streams' generator key, distinct per segment
     burst: bool
+    folder: str  # relative to the recording ("" for the recording's own files)
 
 
 def recording_segments(scenario: Scenario) -> list[_Segment]:
     """What `record` will write; raises ArsimError for settings that do not fit together (call it
     before creating any output)."""
     SensorSettings.of(scenario.device.camera).check()
-    segments = [_Segment("capture", capture_sweep(scenario), None, 1, True)]
+    segments = [_Segment("capture", capture_sweep(scenario), None, 1, True, "")]
     if scenario.ar.enabled:
-        segments.append(_Segment("ar", ar_path(scenario), Table.of(scenario.ar), 4, False))
+        segments.append(_Segment("ar", ar_path(scenario), Table.of(scenario.ar), 4, False, "ar"))
     return segments
 
 
@@ -136,27 +141,21 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
     the same scenario and seed give byte-identical files."""
     cam = scenario.device.camera
     segments = recording_segments(scenario)
-    counts = [int(math.floor(s.trajectory.duration * cam.fps)) + 1 for s in segments]
+    counts = [frame_count(s.trajectory, cam.fps) for s in segments]
     probe = load_environment(scenario.environment)
-    results = []
+    # The capture's meta.json points to the other segments' folders.
+    links = {"ar_recording": s.folder for s in segments if s.name == "ar"}
+    yaw = []
     for k, segment in enumerate(segments):
         done, total = sum(counts[:k]), sum(counts)
-        folder = out_dir if segment.name == "capture" else out_dir / segment.name
-        results.append(_record_segment(scenario, probe, segment, folder,
-                                       lambda f: progress((done + f * counts[k]) / total)))
-        if segment.name == "capture" and scenario.ar.enabled:
-            _add_to_meta(out_dir, {"ar_recording": "ar"})
-    yaw = results[0]
-    return RecordSummary(counts[0], segments[0].trajectory.duration, yaw, counts[1] if len(counts) > 1 else 0)
-
-
-def _add_to_meta(folder: Path, entries: dict) -> None:
-    meta = json.loads((folder / "meta.json").read_text())
-    write_text_atomic(folder / "meta.json", json.dumps(meta | entries, indent=2) + "\n")
+        yaw.append(_record_segment(scenario, probe, segment, out_dir / segment.folder,
+                                   lambda f: progress((done + f * counts[k]) / total),
+                                   links if segment.name == "capture" else {}))
+    return RecordSummary(counts[0], segments[0].trajectory.duration, yaw[0], counts[1] if len(counts) > 1 else 0)
 
 
 def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, out_dir: Path,
-                    progress: Callable[[float], None]) -> float:
+                    progress: Callable[[float], None], extra_meta: dict) -> float:
     """Write one segment's files; returns the fused yaw error at its end (degrees)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "frames").mkdir(exist_ok=True)
@@ -180,7 +179,7 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     ae = AutoExposure(sensor, response)
     burst_rows = (_write_burst(out_dir, renderer, trajectory.camera_orientation([0.0], mount)[0], scenario)
                   if segment.burst else [])
-    n_frames = int(math.floor(trajectory.duration * cam.fps)) + 1
+    n_frames = frame_count(trajectory, cam.fps)
     rows = []
     times = np.arange(n_frames) / cam.fps
     views, positions = trajectory.camera_orientation(times, mount), trajectory.position(times)
@@ -230,7 +229,7 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
         meta["table"] = {"tag_family": t.tag_family, "tag_id": t.tag_id, "tag_size_m": t.tag_size_m,
                          "tag_corners_world": t.tag_corners_world().tolist(), "size_m": list(t.size_m),
                          "albedo": list(t.albedo), "light": [float(v) for v in renderer.table_light]}
-    write_text_atomic(out_dir / "meta.json", json.dumps(meta, indent=2) + "\n")
+    write_text_atomic(out_dir / "meta.json", json.dumps(meta | extra_meta, indent=2) + "\n")
     return float(yaw_error_deg(fused[-1:], truth[-1:])[0])
 
 
