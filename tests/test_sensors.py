@@ -138,3 +138,16 @@ def test_gauss_markov_recursion_equals_scipys_filter():
     drive, state, phi = rng.standard_normal((5000, 3)), rng.standard_normal(3), 0.999
     expected, _ = lfilter([1.0], [1.0, -phi], drive, axis=0, zi=(phi * state)[None, :])
     np.testing.assert_allclose(_first_order_recursion(drive, phi, state), expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("mode", ["game-rotation-vector", "rotation-vector"])
+def test_compiled_fusion_equals_the_scipy_reference(mode):
+    from arsim.sensors.fusion import mahony, mahony_reference
+
+    sweep = CaptureSweep(duration=8.0)
+    streams = simulate_imu(sweep, np.random.default_rng(21))
+    start = sweep.orientation([0.0])[0]
+    t, fused = mahony(streams, start, mode, kp=1.0, ki=0.05)
+    t_ref, reference = mahony_reference(streams, start, mode, kp=1.0, ki=0.05)
+    assert np.array_equal(t, t_ref)
+    assert (fused * reference.inv()).magnitude().max() < 1e-12

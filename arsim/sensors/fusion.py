@@ -105,17 +105,11 @@ def _mahony_steps(t, gyro, accel, accel_at, mag, mag_at, use_mag, q0, kp, ki):  
 
 
 def mahony_reference(streams: dict[str, SensorStream], start: Rotation, mode: str = "game-rotation-vector",
-           kp: float = 1.0, ki: float = 0.0) -> tuple[np.ndarray, Rotation]:
+                     kp: float = 1.0, ki: float = 0.0) -> tuple[np.ndarray, Rotation]:
     """mahony step by step with scipy rotations: the reference the compiled filter is tested against."""
-    if mode not in MODES:
-        raise ArsimError(f"fusion mode '{mode}' is unknown; use one of {', '.join(MODES)}")
-    gyro, accel = streams["gyroscope"], streams["accelerometer"]
-    t = gyro.t_ns
-    accel_at = np.clip(np.searchsorted(accel.t_ns, t), 0, len(accel.t_ns) - 1)
+    t, accel_at, mag_at = _sample_indices(streams, mode)
+    gyro, accel, mag = streams["gyroscope"], streams["accelerometer"], streams["magnetometer"]
     use_mag = mode == "rotation-vector"
-    if use_mag:
-        mag = streams["magnetometer"]
-        mag_at = np.clip(np.searchsorted(mag.t_ns, t, side="right") - 1, 0, len(mag.t_ns) - 1)
     q = start
     out = np.empty((len(t), 4))
     integral = np.zeros(3)
