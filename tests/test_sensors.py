@@ -151,3 +151,22 @@ def test_compiled_fusion_equals_the_scipy_reference(mode):
     t_ref, reference = mahony_reference(streams, start, mode, kp=1.0, ki=0.05)
     assert np.array_equal(t, t_ref)
     assert (fused * reference.inv()).magnitude().max() < 1e-12
+
+
+def test_coverage_cone_pretest_changes_nothing():
+    """seen_by_views projects only directions near each view's axis; a projection of every direction in
+    every view gives the same answer."""
+    from arsim.sensors.coverage import fibonacci_directions, seen_by_views
+
+    camera = CameraIntrinsics.from_fov(160, 120, 40.0, k1=-0.2, k2=0.05)
+    views = CaptureSweep(duration=10.0).camera_orientation(np.arange(0.0, 10.0, 0.2))
+    directions = fibonacci_directions(3000)
+    brute = np.zeros(len(directions), dtype=bool)
+    for view in views:
+        cam = view.inv().apply(directions)
+        ahead = cam[:, 2] > 1e-9
+        px = camera.project(np.where(ahead[:, None], cam, 1.0))
+        brute |= ahead & (px[:, 0] >= -0.5) & (px[:, 0] <= camera.width - 0.5) \
+            & (px[:, 1] >= -0.5) & (px[:, 1] <= camera.height - 0.5)
+    seen = seen_by_views(views, camera, directions, chunk=7)
+    assert 0.2 < seen.mean() < 0.95 and np.array_equal(seen, brute)
