@@ -54,10 +54,9 @@ def _with_alpha(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=-1))
 
 
-def _environment_program(ctx, fragment: str):
-    """A program of the full-screen triangle and a fragment shader that uses scene.glsl."""
-    source = "#version 430\n" + _shader("scene.glsl") + _shader(fragment)
-    return ctx.program(vertex_shader=_shader("fullscreen.vert"), fragment_shader=source)
+def _scene_source(main: str, table: bool) -> str:
+    """GLSL of a shader that uses scene.glsl, with the table compiled in or not."""
+    return "#version 430\n" + ("#define TABLE\n" if table else "") + _shader("scene.glsl") + _shader(main)
 
 
 class EnvironmentRenderer:
@@ -79,7 +78,8 @@ class EnvironmentRenderer:
         self.texture = self.ctx.texture((n, n), 4, _with_alpha(extended).tobytes(), dtype="f4")
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False  # clamp to edge
-        self.program = _environment_program(self.ctx, "environment_view.frag")
+        self.program = self.ctx.program(vertex_shader=_shader("fullscreen.vert"),
+                                        fragment_shader=_scene_source("environment_view.frag", table is not None))
         # Texture row y is image row y: the framebuffer then holds the image top row first, as read back.
         rays = np.ascontiguousarray(pixel_rays(camera).astype(np.float32))
         self.rays = self.ctx.texture((camera.width, camera.height), 4, _with_alpha(rays).tobytes(), dtype="f4")
@@ -102,7 +102,6 @@ class EnvironmentRenderer:
         self.paper.use(5)
         program["probe"].value = 0
         program["rays"].value = 1
-        program["table_enabled"].value = self.table is not None
         if self.table is not None:
             if position is None:
                 raise ValueError("a view of the table needs the camera position")
@@ -121,15 +120,17 @@ class EnvironmentRenderer:
 
 
 class CameraRenderer(EnvironmentRenderer):
-    """8-bit camera frames rendered in one GL pass: the view, the sensor noise (hashed, so the GPU draws
-    the same numbers as camera.pixel_normals), the gain and the response curve. camera.expose is its
-    NumPy reference; only the radiance lookup differs (bilinear filtering with 8-bit weights)."""
+    """8-bit camera frames made in one GL compute pass: the view, the sensor noise (hashed, so the GPU
+    draws the same numbers as camera.pixel_normals), the gain and the response curve. camera.expose is
+    its NumPy reference; only the radiance lookup differs (bilinear filtering with 8-bit weights)."""
+
+    GROUP = 64  # pixels per work group (a row segment), as camera_frame.comp declares
 
     def __init__(self, probe: np.ndarray, camera: CameraIntrinsics, sensor: SensorSettings, response: ResponseCurve,
                  ctx=None, table: Table | None = None):
         super().__init__(probe, camera, ctx, table)
         self.sensor = sensor
-        self.frame_program = _environment_program(self.ctx, "camera_frame.frag")
+        self.frame_program = self.ctx.compute_shader(_scene_source("camera_frame.comp", table is not None))
         falloff = vignette(camera.height, camera.width, sensor.vignetting).astype(np.float32)
         self.falloff = self.ctx.texture((camera.width, camera.height), 1, falloff.tobytes(),
                                         dtype="f4")
@@ -141,15 +142,14 @@ class CameraRenderer(EnvironmentRenderer):
         self.frame_program["response_contrast"].value = response.contrast
         self.frame_program["read_noise_var"].value = sensor.read_noise_e**2
         self.frame_program["width"].value = camera.width
-        self.frame_vao = self.ctx.vertex_array(self.frame_program, [])
+        self.frame_program["height"].value = camera.height
         self.codes = self.ctx.texture((camera.width, camera.height), 4, dtype="u1")  # integer RGBA8UI
-        self.frame_fbo = self.ctx.framebuffer(color_attachments=[self.codes])
 
     def capture(self, camera_to_world: Rotation, exposure_s: float, iso: float, key: int,
                 position: np.ndarray | None = None) -> np.ndarray:
-        """The 8-bit frame (H, W, 3) uint8 of one view; key: camera.noise_key of the frame."""
+        """The 8-bit frame (H, W, 3) uint8 of one view (a read-only view of the bytes read back); key:
+        camera.noise_key of the frame."""
         p, s = self.frame_program, self.sensor
-        self.frame_fbo.use()
         self._bind(p, camera_to_world, position)
         self.falloff.use(2)
         p["falloff"].value = 2
@@ -157,11 +157,13 @@ class CameraRenderer(EnvironmentRenderer):
         p["electrons_per_radiance"].value = float(np.float32(exposure_s * s.sensitivity * s.full_well_e))
         p["gain"].value = float(np.float32(iso / s.base_iso / s.full_well_e))
         p["noise_key"].value = int(key)
-        self.frame_vao.render(mode=moderngl.TRIANGLES, vertices=3)
-        data = self.frame_fbo.read(components=3, dtype="u1", alignment=1)
-        return np.frombuffer(data, dtype=np.uint8).reshape(self.camera.height, self.camera.width, 3)
+        self.codes.bind_to_image(0, read=False, write=True)
+        p.run(-(-self.camera.width // self.GROUP), self.camera.height)
+        self.ctx.memory_barrier()
+        data = np.frombuffer(self.codes.read(), dtype=np.uint8)
+        return data.reshape(self.camera.height, self.camera.width, 4)[:, :, :3]
 
     def release(self) -> None:
-        for obj in (self.frame_vao, self.frame_program, self.frame_fbo, self.codes, self.falloff):
+        for obj in (self.frame_program, self.codes, self.falloff):
             obj.release()
         super().release()
