@@ -37,18 +37,30 @@ def _lon_lat(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lon, np.degrees(np.arcsin(np.clip(d[:, 1], -1, 1)))
 
 
+def recording_camera(rec: Recording) -> CameraIntrinsics:
+    cam = rec.meta["camera"]
+    return CameraIntrinsics(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"],
+                            cam.get("k1", 0.0), cam.get("k2", 0.0))
+
+
+def _frame_truth(rec: Recording) -> np.ndarray:
+    """Per frame, the index of the ground-truth sample nearest in time."""
+    t_truth = rec.groundtruth[0]
+    return np.clip(np.searchsorted(t_truth, [f["t_ns"] for f in rec.frames]), 0, len(t_truth) - 1)
+
+
 def frame_camera_orientations(rec: Recording) -> Rotation:
     """True camera-to-world rotations at the frame times (nearest ground-truth sample)."""
-    t_truth, _, truth = rec.groundtruth
-    t_frames = np.array([f["t_ns"] for f in rec.frames])
-    nearest = np.clip(np.searchsorted(t_truth, t_frames), 0, len(t_truth) - 1)
-    return truth[nearest] * Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))
+    return rec.groundtruth[2][_frame_truth(rec)] * Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))
+
+
+def frame_positions(rec: Recording) -> np.ndarray:
+    """True device positions (K, 3) at the frame times (nearest ground-truth sample)."""
+    return rec.groundtruth[1][_frame_truth(rec)]
 
 
 def plot_coverage(rec: Recording, path: Path, samples: int = 20000) -> tuple[Path, float]:
-    cam = rec.meta["camera"]
-    camera = CameraIntrinsics(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"],
-                              cam.get("k1", 0.0), cam.get("k2", 0.0))
+    camera = recording_camera(rec)
     rotations = frame_camera_orientations(rec)
     directions = fibonacci_directions(samples)
     seen = seen_by_views(rotations, camera, directions)
@@ -132,16 +144,10 @@ def plot_recording(rec: Recording, out_dir: Path) -> dict:
 def tag_in_view(rec: Recording) -> np.ndarray:
     """Per frame of an AR recording: whether all four corners of the tag project inside the image
     (true pose; the tag faces up, so it is never seen from behind on this path)."""
-    cam = rec.meta["camera"]
-    camera = CameraIntrinsics(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"],
-                              cam.get("k1", 0.0), cam.get("k2", 0.0))
-    t_truth, positions, _ = rec.groundtruth
-    t_frames = np.array([f["t_ns"] for f in rec.frames])
-    nearest = np.clip(np.searchsorted(t_truth, t_frames), 0, len(t_truth) - 1)
-    views = frame_camera_orientations(rec)
+    camera = recording_camera(rec)
     corners = np.array(rec.meta["table"]["tag_corners_world"])
-    seen = np.zeros(len(t_frames), dtype=bool)
-    for k, (view, position) in enumerate(zip(views, positions[nearest])):
+    seen = np.zeros(len(rec.frames), dtype=bool)
+    for k, (view, position) in enumerate(zip(frame_camera_orientations(rec), frame_positions(rec))):
         local = view.inv().apply(corners - position)
         if np.all(local[:, 2] > 1e-6):
             px = camera.project(local)
@@ -153,9 +159,6 @@ def plot_ar_path(rec: Recording, path: Path) -> dict:
     """The AR path seen from above around the table and tag, and the tag's visibility and distance
     over time."""
     plt = _pyplot()
-    t_truth, positions, _ = rec.groundtruth
-    t_frames = np.array([f["t_ns"] for f in rec.frames])
-    nearest = np.clip(np.searchsorted(t_truth, t_frames), 0, len(t_truth) - 1)
     seen = tag_in_view(rec)
     table = rec.meta["table"]
     fig, (top, timeline) = plt.subplots(1, 2, figsize=(11, 4.5), gridspec_kw={"width_ratios": [1, 1.6]})
@@ -163,13 +166,13 @@ def plot_ar_path(rec: Recording, path: Path) -> dict:
     top.add_patch(plt.Rectangle((-w / 2, -d / 2), w, d, color="peru", alpha=0.5, label="table"))
     h = table["tag_size_m"] / 2
     top.add_patch(plt.Rectangle((-h, -h), 2 * h, 2 * h, color="black", label="tag"))
-    p = positions[nearest]
+    p = frame_positions(rec)
     top.scatter(p[:, 0], p[:, 2], c=np.where(seen, "tab:green", "tab:red"), s=4)
     top.set_aspect("equal")
     top.set_xlabel("world x (m)")
     top.set_ylabel("world z (m)")
     top.set_title("path from above (green: tag in view)")
-    t = t_frames / 1e9
+    t = np.array([f["t_ns"] for f in rec.frames]) / 1e9
     timeline.plot(t, np.linalg.norm(p, axis=1), color="tab:blue", label="distance to the tag (m)")
     timeline.fill_between(t, 0, 1, where=~seen, transform=timeline.get_xaxis_transform(), color="tab:red",
                           alpha=0.2, label="tag out of view")

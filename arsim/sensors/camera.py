@@ -144,7 +144,7 @@ def vignette(height: int, width: int, strength: float) -> np.ndarray:
 
 
 def pcg_hash(v: np.ndarray) -> np.ndarray:
-    """The PCG hash (Jarzynski and Olano 2020) on uint32, as shaders/camera_frame.frag computes it."""
+    """The PCG hash (Jarzynski and Olano 2020) on uint32, as shaders/camera_frame.comp computes it."""
     v = np.asarray(v, dtype=np.uint32)
     with np.errstate(over="ignore"):  # arithmetic modulo 2^32 is the point
         state = v * np.uint32(747796405) + np.uint32(2891336453)
@@ -165,7 +165,7 @@ def noise_key(seed: int, stream: str, frame: int) -> int:
 def pixel_normals(key: int, height: int, width: int) -> np.ndarray:
     """Standard normals (H, W, 3) float32 of one frame: Box-Muller on two hashed uniforms per sample n
     (row-major, channel fastest), so that every pixel's noise is known without a sequential generator
-    and the GL camera (camera_frame.frag) draws the very same numbers."""
+    and the GL camera (camera_frame.comp) draws the very same numbers."""
     n = np.arange(height * width * 3, dtype=np.uint32)
     u = [(((pcg_hash(np.uint32(2) * n + np.uint32(j) + np.uint32(key)) >> np.uint32(8)) + np.uint32(1))
           .astype(np.float32) * np.float32(1.0 / 16777216.0)) for j in (0, 1)]
