@@ -96,6 +96,19 @@ def test_8_bit_encoding_equals_rounding_the_curve(kind, gamma):
     np.testing.assert_array_equal(curve.encode(x), np.round(curve.apply(x) * 255).astype(np.uint8))
 
 
+@pytest.mark.parametrize("kind, gamma", [("srgb", 2.2), ("s-curve", 2.2), ("gamma", 10.0), ("gamma", 0.1)])
+def test_the_shader_code_guesses_are_within_their_stated_steps(kind, gamma):
+    curve = ResponseCurve(kind, gamma=gamma)
+    bins = 1024
+    packed, steps = curve.guess_table(bins)
+    guesses = (packed[:, None] >> np.array([0, 8, 16, 24], dtype=np.uint32)).ravel() & 255
+    x = np.concatenate([np.random.default_rng(3).random(300000), np.random.default_rng(4).random(100000) * 1e-4])
+    bin_of_x = np.minimum((np.sqrt(x.astype(np.float32)) * bins).astype(int), bins - 1)
+    off = np.abs(guesses[bin_of_x].astype(int) - curve.encode(x))
+    assert off.max() <= steps
+    assert (steps == 1) == (kind != "gamma" or 0.5 <= gamma <= 2.6)  # one step for the usual curves
+
+
 def test_hashed_pixel_normals_are_standard_normal_and_independent():
     from scipy import stats
 

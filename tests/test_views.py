@@ -57,8 +57,9 @@ def test_gl_view_with_lens_distortion_matches_the_reference(renderer_and_probe):
     assert rel.max() < 1e-2 and rel.mean() < 1e-3
 
 
-@pytest.mark.parametrize("response", ["srgb", "gamma", "s-curve"])
-def test_gl_camera_frames_equal_the_numpy_sensor_model(renderer_and_probe, response):
+@pytest.mark.parametrize("response, gamma", [("srgb", 2.2), ("gamma", 2.2), ("s-curve", 2.2), ("gamma", 10.0),
+                                             ("gamma", 0.1)])
+def test_gl_camera_frames_equal_the_numpy_sensor_model(renderer_and_probe, response, gamma):
     """The GL camera (one pass: view, noise, gain, response, 8 bits) against camera.expose applied to
     the GL radiance with the same hashed noise. Stated tolerance: identical codes on llvmpipe; a GPU
     that fuses multiply-adds may move a sample across a code threshold, so up to 1e-4 of the samples
@@ -67,18 +68,21 @@ def test_gl_camera_frames_equal_the_numpy_sensor_model(renderer_and_probe, respo
     from arsim.sensors.views import CameraRenderer
 
     _, probe = renderer_and_probe
-    sensor, curve = SensorSettings(), ResponseCurve(response)
+    sensor, curve = SensorSettings(), ResponseCurve(response, gamma=gamma)  # steep gammas: guesses many codes off
     camera = CameraRenderer(probe, CAMERA, sensor, curve)
     rotation = CaptureSweep().camera_orientation([17.0])[0]
     radiance = camera.render(rotation)
-    for k, (exposure, iso) in enumerate([(1 / 30, 100.0), (1 / 500, 800.0), (1 / 8000, 50.0)]):
+    lit = []
+    for k, (exposure, iso) in enumerate([(1 / 30, 100.0), (1 / 500, 800.0), (1 / 8000, 50.0), (1 / 2, 400.0)]):
         key = noise_key(4, "capture", k)
         gl = camera.capture(rotation, exposure, iso, key)
         ref = expose(radiance, exposure, iso, sensor, curve, pixel_normals(key, CAMERA.height, CAMERA.width),
                      vignette(CAMERA.height, CAMERA.width, sensor.vignetting))
         diff = np.abs(gl.astype(int) - ref)
         assert diff.max() <= 1 and np.mean(diff > 0) <= 1e-4
-        assert 5 < ref.mean() < 250 or k == 2  # the settings span dark to bright frames
+        assert 5 < ref.mean() < 250 or k >= 2 or gamma != 2.2  # the settings span dark to bright frames
+        lit.append(np.mean((ref > 0) & (ref < 255)))
+    assert max(lit) > 0.05  # a frame of the steep curves too has many codes off the ends
     camera.release()
 
 

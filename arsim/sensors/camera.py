@@ -84,6 +84,20 @@ class ResponseCurve:
         t32 = t.astype(np.float32)
         return np.where(t32.astype(np.float64) < t, np.nextafter(t32, np.float32(np.inf)), t32)
 
+    def guess_table(self, bins: int) -> tuple[np.ndarray, int]:
+        """First guesses of the code for the GL camera, four 8-bit codes per uint32, and how many code
+        steps a guess can be off. Bin k covers sqrt(x) in [k, k + 1) / bins (even in sqrt(x), so that
+        dark values, where the curves are steep, get fine bins) and holds the code of its centre. A
+        lookup instead of the curve's pow and tanh; the shader settles the guess against the exact
+        thresholds. The step count allows for a float32 sqrt a few ulp off (a value binned next door)."""
+        k = np.arange(bins)
+        guesses = np.searchsorted(self._code_thresholds, ((k + 0.5) / bins) ** 2, side="right")
+        lowest = np.searchsorted(self._code_thresholds, (k / bins) ** 2 * (1 - 1e-5), side="right")
+        highest = np.searchsorted(self._code_thresholds, ((k + 1) / bins) ** 2 * (1 + 1e-5), side="right")
+        steps = int(max(np.max(guesses - lowest), np.max(highest - guesses), 1))
+        packed = (guesses.astype(np.uint32).reshape(-1, 4) << np.array([0, 8, 16, 24], dtype=np.uint32))
+        return packed.sum(axis=1, dtype=np.uint32), steps
+
     def decode(self, codes: np.ndarray) -> np.ndarray:
         """Relative exposure of 8-bit codes (a 256-entry table of the inverse curve)."""
         return self._code_values[codes]

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.gl import create_gl_context
 from arsim.core.resample import extend_beyond_rim, sample_anglemap
-from arsim.sensors.camera import RESPONSES, ResponseCurve, SensorSettings, vignette
+from arsim.sensors.camera import ResponseCurve, SensorSettings, vignette
 from arsim.sensors.table import Table, table_radiance_reference, upward_light
 
 
@@ -54,9 +54,10 @@ def _with_alpha(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=-1))
 
 
-def _scene_source(main: str, table: bool) -> str:
-    """GLSL of a shader that uses scene.glsl, with the table compiled in or not."""
-    return "#version 430\n" + ("#define TABLE\n" if table else "") + _shader("scene.glsl") + _shader(main)
+def _scene_source(main: str, table: bool, defines: dict[str, int] | None = None) -> str:
+    """GLSL of a shader that uses scene.glsl, with the table compiled in or not, and other defines."""
+    lines = ["#version 430"] + (["#define TABLE"] if table else []) + [f"#define {k} {v}" for k, v in (defines or {}).items()]
+    return "\n".join(lines) + "\n" + _shader("scene.glsl") + _shader(main)
 
 
 class EnvironmentRenderer:
@@ -125,21 +126,22 @@ class CameraRenderer(EnvironmentRenderer):
     its NumPy reference; only the radiance lookup differs (bilinear filtering with 8-bit weights)."""
 
     GROUP = 64  # pixels per work group (a row segment), as camera_frame.comp declares
+    GUESS_BINS = 1024  # bins of the response curve's code guesses, as camera_frame.comp declares
 
     def __init__(self, probe: np.ndarray, camera: CameraIntrinsics, sensor: SensorSettings, response: ResponseCurve,
                  ctx=None, table: Table | None = None):
         super().__init__(probe, camera, ctx, table)
         self.sensor = sensor
-        self.frame_program = self.ctx.compute_shader(_scene_source("camera_frame.comp", table is not None))
+        guesses, steps = response.guess_table(self.GUESS_BINS)
+        self.frame_program = self.ctx.compute_shader(_scene_source("camera_frame.comp", table is not None,
+                                                                   {"SETTLE_STEPS": steps}))
         falloff = vignette(camera.height, camera.width, sensor.vignetting).astype(np.float32)
         self.falloff = self.ctx.texture((camera.width, camera.height), 1, falloff.tobytes(),
                                         dtype="f4")
         self.falloff.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        # The response curve: a float32 guess of the code, settled by the exact thresholds.
+        # The response curve: a guess of the code from a table, settled by the exact thresholds.
         self.frame_program["thresholds"].write(response.thresholds_float32().astype("f4").tobytes())
-        self.frame_program["response_kind"].value = RESPONSES.index(response.kind)
-        self.frame_program["response_gamma"].value = response.gamma
-        self.frame_program["response_contrast"].value = response.contrast
+        self.frame_program["guess_table"].write(guesses.tobytes())
         self.frame_program["read_noise_var"].value = sensor.read_noise_e**2
         self.frame_program["width"].value = camera.width
         self.frame_program["height"].value = camera.height

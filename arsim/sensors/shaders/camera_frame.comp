@@ -15,9 +15,10 @@ uniform uint noise_key;             // camera.noise_key(seed, stream, frame)
 uniform int width;
 uniform int height;
 uniform float thresholds[255];      // code c covers [t[c-1], t[c]) (float32, rounded up)
-uniform int response_kind;          // 0 srgb, 1 gamma, 2 s-curve (camera.ResponseCurve)
-uniform float response_gamma;
-uniform float response_contrast;
+// A first guess of the code for x in [0, 1]: the code at the centre of x's bin, with bins even in sqrt(x)
+// (ResponseCurve.guess_table, four codes per word); the exact thresholds then settle it.
+const uint GUESS_BINS = 1024u;
+uniform uint guess_table[GUESS_BINS / 4u];
 
 uvec3 pcg_hash(uvec3 v) {
     uvec3 state = v * 747796405u + 2891336453u;
@@ -29,19 +30,18 @@ vec3 unit_interval(uvec3 u) {  // (0, 1], exact in float32
     return vec3((u >> 8u) + 1u) * (1.0 / 16777216.0);
 }
 
-vec3 response(vec3 x) {  // ResponseCurve.apply in float32: only a first guess of the code
-    if (response_kind == 1) return pow(x, vec3(1.0 / response_gamma));
-    vec3 y = mix(1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055, 12.92 * x, lessThanEqual(x, vec3(0.0031308)));
-    if (response_kind == 2) y = 0.5 + 0.5 * tanh(response_contrast * (y - 0.5)) / tanh(response_contrast / 2.0);
-    return y;
-}
-
-// The number of thresholds <= x, exactly as ResponseCurve.encode counts them: the curve in float32 is
-// off by far less than a code step, so the guess is the code or a neighbour, and the exact
-// (float32, rounded up) thresholds settle which.
-uint settle(float x, uint c) {
-    if (c > 0u && x < thresholds[c - 1u]) return c - 1u;
-    if (c < 255u && x >= thresholds[c]) return c + 1u;
+// The number of thresholds <= x, exactly as ResponseCurve.encode counts them: from the guess, at most
+// SETTLE_STEPS (defined by the host: guess_table's bound) down, then up. Loops with a fixed count, as
+// llvmpipe runs data-dependent loops far slower.
+uint encode(float x) {
+    uint bin = min(uint(sqrt(x) * float(GUESS_BINS)), GUESS_BINS - 1u);
+    uint c = (guess_table[bin >> 2u] >> (8u * (bin & 3u))) & 255u;
+    for (int i = 0; i < SETTLE_STEPS; i++) {
+        if (c > 0u && x < thresholds[c - 1u]) c--;
+    }
+    for (int i = 0; i < SETTLE_STEPS; i++) {
+        if (c < 255u && x >= thresholds[c]) c++;
+    }
     return c;
 }
 
@@ -55,6 +55,5 @@ void main() {
     vec3 normal = sqrt(-2.0 * log(u1)) * cos(2.0 * PI * u2);  // Box-Muller
     vec3 e = electrons + normal * sqrt(electrons + read_noise_var);
     vec3 signal = clamp(e * gain, 0.0, 1.0);
-    uvec3 guess = uvec3(clamp(round(255.0 * response(signal)), 0.0, 255.0));
-    imageStore(codes, pixel, uvec4(settle(signal.r, guess.r), settle(signal.g, guess.g), settle(signal.b, guess.b), 255u));
+    imageStore(codes, pixel, uvec4(encode(signal.r), encode(signal.g), encode(signal.b), 255u));
 }
