@@ -177,14 +177,18 @@ def noise_key(seed: int, stream: str, frame: int) -> int:
 
 
 def pixel_normals(key: int, height: int, width: int) -> np.ndarray:
-    """Standard normals (H, W, 3) float32 of one frame: Box-Muller on two hashed uniforms per sample n
-    (row-major, channel fastest), so that every pixel's noise is known without a sequential generator
-    and the GL camera (camera_frame.comp) draws the very same numbers."""
-    n = np.arange(height * width * 3, dtype=np.uint32)
-    u = [(((pcg_hash(np.uint32(2) * n + np.uint32(j) + np.uint32(key)) >> np.uint32(8)) + np.uint32(1))
-          .astype(np.float32) * np.float32(1.0 / 16777216.0)) for j in (0, 1)]
+    """Standard normals (H, W, 3) float32 of one frame, so that every pixel's noise is known without a
+    sequential generator and the GL camera (camera_frame.comp) draws the very same numbers: per pixel p
+    (row-major) four hashed uniforms u_j of 4 p + j, and Box-Muller on the pairs (u_0, u_1) (its cosine
+    and sine: red, green) and (u_2, u_3) (its cosine: blue)."""
+    p = np.arange(height * width, dtype=np.uint32)[:, None]
+    hashed = pcg_hash(np.uint32(4) * p + np.arange(4, dtype=np.uint32) + np.uint32(key))
+    u = ((hashed >> np.uint32(8)) + np.uint32(1)).astype(np.float32) * np.float32(1.0 / 16777216.0)
     two_pi = np.float32(2.0) * np.float32(np.pi)
-    normals = np.sqrt(np.float32(-2.0) * np.log(u[0])) * np.cos(two_pi * u[1])
+    radius = np.sqrt(np.float32(-2.0) * np.log(u[:, 0::2]))
+    angle = two_pi * u[:, 1::2]
+    normals = np.stack([radius[:, 0] * np.cos(angle[:, 0]), radius[:, 0] * np.sin(angle[:, 0]),
+                        radius[:, 1] * np.cos(angle[:, 1])], axis=-1)
     return normals.reshape(height, width, 3)
 
 

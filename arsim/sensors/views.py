@@ -135,10 +135,9 @@ class CameraRenderer(EnvironmentRenderer):
         guesses, steps = response.guess_table(self.GUESS_BINS)
         self.frame_program = self.ctx.compute_shader(_scene_source("camera_frame.comp", table is not None,
                                                                    {"SETTLE_STEPS": steps}))
+        # The vignetting rides in the rays' fourth channel: one texel fetch per pixel for both.
         falloff = vignette(camera.height, camera.width, sensor.vignetting).astype(np.float32)
-        self.falloff = self.ctx.texture((camera.width, camera.height), 1, falloff.tobytes(),
-                                        dtype="f4")
-        self.falloff.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.rays.write(np.dstack([pixel_rays(camera).astype(np.float32), falloff]).tobytes())
         # The response curve: a guess of the code from a table, settled by the exact thresholds.
         self.frame_program["thresholds"].write(response.thresholds_float32().astype("f4").tobytes())
         self.frame_program["guess_table"].write(guesses.tobytes())
@@ -153,8 +152,6 @@ class CameraRenderer(EnvironmentRenderer):
         camera.noise_key of the frame."""
         p, s = self.frame_program, self.sensor
         self._bind(p, camera_to_world, position)
-        self.falloff.use(2)
-        p["falloff"].value = 2
         # The same float32 constants as camera.expose.
         p["electrons_per_radiance"].value = float(np.float32(exposure_s * s.sensitivity * s.full_well_e))
         p["gain"].value = float(np.float32(iso / s.base_iso / s.full_well_e))
@@ -166,6 +163,6 @@ class CameraRenderer(EnvironmentRenderer):
         return data.reshape(self.camera.height, self.camera.width, 4)[:, :, :3]
 
     def release(self) -> None:
-        for obj in (self.frame_program, self.codes, self.falloff):
+        for obj in (self.frame_program, self.codes):
             obj.release()
         super().release()

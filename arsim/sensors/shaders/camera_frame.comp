@@ -7,7 +7,6 @@
 layout(local_size_x = 64, local_size_y = 1) in;
 layout(rgba8ui, binding = 0) writeonly uniform uimage2D codes;   // the frame, top row first
 
-uniform sampler2D falloff;          // vignetting per pixel, top row first like the rays
 uniform float electrons_per_radiance;
 uniform float read_noise_var;       // read noise squared, electrons^2
 uniform float gain;                 // iso / base_iso / full_well: electrons to relative exposure
@@ -20,14 +19,10 @@ uniform float thresholds[255];      // code c covers [t[c-1], t[c]) (float32, ro
 const uint GUESS_BINS = 1024u;
 uniform uint guess_table[GUESS_BINS / 4u];
 
-uvec3 pcg_hash(uvec3 v) {
-    uvec3 state = v * 747796405u + 2891336453u;
-    uvec3 word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+uvec4 pcg_hash(uvec4 v) {  // camera.pcg_hash
+    uvec4 state = v * 747796405u + 2891336453u;
+    uvec4 word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
     return (word >> 22u) ^ word;
-}
-
-vec3 unit_interval(uvec3 u) {  // (0, 1], exact in float32
-    return vec3((u >> 8u) + 1u) * (1.0 / 16777216.0);
 }
 
 // The number of thresholds <= x, exactly as ResponseCurve.encode counts them: from the guess, at most
@@ -48,11 +43,15 @@ uint encode(float x) {
 void main() {
     ivec2 pixel = ivec2(gl_GlobalInvocationID.xy);
     if (pixel.x >= width || pixel.y >= height) return;  // the last group of a row may stick out
-    uvec3 n = (uint(pixel.y) * uint(width) + uint(pixel.x)) * 3u + uvec3(0u, 1u, 2u);  // sample index, channel fastest
-    vec3 electrons = max(pixel_radiance(pixel) * electrons_per_radiance * texelFetch(falloff, pixel, 0).r, 0.0);
-    vec3 u1 = unit_interval(pcg_hash(2u * n + noise_key));
-    vec3 u2 = unit_interval(pcg_hash(2u * n + 1u + noise_key));
-    vec3 normal = sqrt(-2.0 * log(u1)) * cos(2.0 * PI * u2);  // Box-Muller
+    uint p = uint(pixel.y) * uint(width) + uint(pixel.x);  // pixel index, row-major
+    vec4 ray = texelFetch(rays, pixel, 0);  // w: the vignetting (one fetch for both)
+    vec3 electrons = max(radiance_along(pixel, camera_to_world * ray.xyz) * electrons_per_radiance * ray.w, 0.0);
+    // Four hashed uniforms in (0, 1] per pixel (exact in float32), two Box-Muller pairs: cosine and
+    // sine of the first for red and green, the cosine of the second for blue.
+    uvec4 h = pcg_hash(4u * p + uvec4(0u, 1u, 2u, 3u) + noise_key);
+    vec4 u = vec4((h >> 8u) + 1u) * (1.0 / 16777216.0);
+    vec2 radius = sqrt(-2.0 * log(u.xz));
+    vec3 normal = vec3(radius.x * cos(2.0 * PI * u.y), radius.x * sin(2.0 * PI * u.y), radius.y * cos(2.0 * PI * u.w));
     vec3 e = electrons + normal * sqrt(electrons + read_noise_var);
     vec3 signal = clamp(e * gain, 0.0, 1.0);
     imageStore(codes, pixel, uvec4(encode(signal.r), encode(signal.g), encode(signal.b), 255u));

@@ -3,7 +3,8 @@
 // The environment is an angle map extended past its rim (so bilinear lookups near -z stay inside).
 
 uniform sampler2D probe;        // angle map, row 0 of the image uploaded first (t = 1 at the top)
-uniform sampler2D rays;         // per pixel, its unit ray in OpenCV camera axes (lens distortion included)
+uniform sampler2D rays;         // per pixel, its unit ray in OpenCV camera axes (lens distortion included);
+                                // w: its vignetting in the camera pass
 uniform mat3 camera_to_world;   // OpenCV camera axes (x right, y down, z forward) to world
 
 // The table top (y = 0) with the printed tag (sensors/table.py), for views along the AR path: compiled
@@ -44,10 +45,9 @@ bool table_hit(vec3 d, out vec2 hit) {
 }
 #endif
 
-// Radiance seen by image pixel (column x, row y); the ray texture holds the image's top row first.
-// Texture row 0 of the probe is the angle map's top row, at t = 1.
-vec3 pixel_radiance(ivec2 pixel) {
-    vec3 d = world_ray(pixel);
+// Radiance seen by image pixel (column x, row y) along its world ray d; the ray texture holds the
+// image's top row first. Texture row 0 of the probe is the angle map's top row, at t = 1.
+vec3 radiance_along(ivec2 pixel, vec3 d) {
 #ifdef TABLE
     {
         vec2 hit;
@@ -68,4 +68,8 @@ vec3 pixel_radiance(ivec2 pixel) {
 #endif
     vec2 st = anglemap_st(d);
     return texture(probe, vec2(st.x, 1.0 - st.y)).rgb;
+}
+
+vec3 pixel_radiance(ivec2 pixel) {
+    return radiance_along(pixel, world_ray(pixel));
 }
