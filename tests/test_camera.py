@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from arsim.core.errors import ArsimError
-from arsim.sensors.camera import (RESPONSES, AutoExposure, ResponseCurve, SensorSettings, expose, metered_level, noise_key,
+from arsim.sensors.camera import (LUMA, RESPONSES, AutoExposure, ResponseCurve, SensorSettings, expose, metered_level, metering, noise_key,
                                   pixel_normals, vignette)
 
 
@@ -107,6 +107,20 @@ def test_the_shader_code_guesses_are_within_their_stated_steps(kind, gamma):
     off = np.abs(guesses[bin_of_x].astype(int) - curve.encode(x))
     assert off.max() <= steps
     assert (steps == 1) == (kind != "gamma" or 0.5 <= gamma <= 2.6)  # one step for the usual curves
+
+
+@pytest.mark.parametrize("shape", [(480, 640), (61, 83)])
+def test_compiled_metering_equals_the_numpy_formula(shape):
+    rgba = np.random.default_rng(2).integers(0, 256, shape + (4,), dtype=np.uint8)
+    rgba[: shape[0] // 3] = 255  # some clipped rows
+    frame, curve = rgba[..., :3], ResponseCurve()  # a strided view, as read back from GL
+    grid = frame[::4, ::4]
+    y, x = np.mgrid[0:grid.shape[0], 0:grid.shape[1]]
+    weight = np.exp(-(((x - grid.shape[1] / 2) / (0.35 * grid.shape[1])) ** 2 + ((y - grid.shape[0] / 2) / (0.35 * grid.shape[0])) ** 2))
+    level = float(((curve.decode(grid) @ LUMA) * weight / weight.sum()).sum())
+    got = metering(frame, curve)
+    assert got[0] == pytest.approx(level, rel=1e-12) and metered_level(frame, curve) == got[0]
+    assert got[1] == np.mean(grid >= 255) and got[2] == np.mean(grid <= 0)
 
 
 def test_hashed_pixel_normals_are_standard_normal_and_independent():

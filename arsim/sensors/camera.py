@@ -12,6 +12,7 @@ import functools
 from collections import deque
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from arsim.core.errors import ArsimError
@@ -213,11 +214,37 @@ def _metering_weights(height: int, width: int) -> np.ndarray:
     return weight / weight.sum()
 
 
+METERING_STEP = 4  # camera pipelines meter on low-resolution statistics: every fourth pixel each way
+
+
+@numba.njit(cache=True, nogil=True)
+def _meter(frame: np.ndarray, linear_of_code: np.ndarray, luma: np.ndarray, weights: np.ndarray) -> tuple:
+    """Over the metering grid of an 8-bit frame: the weighted mean linear luminance, and the fractions
+    of samples (pixels and channels) at 255 and at 0. One pass, straight from the frame's memory."""
+    level, white, black = 0.0, 0, 0
+    for i in range(weights.shape[0]):
+        for j in range(weights.shape[1]):
+            y = 0.0
+            for c in range(3):
+                code = frame[METERING_STEP * i, METERING_STEP * j, c]
+                y += linear_of_code[code] * luma[c]
+                white += code >= 255
+                black += code <= 0
+            level += y * weights[i, j]
+    samples = 3 * weights.size
+    return level, white / samples, black / samples
+
+
+def metering(frame: np.ndarray, response: ResponseCurve) -> tuple[float, float, float]:
+    """(level, white, black) of a frame: its centre-weighted mean linear luminance (what the
+    auto-exposure measures) and the fractions of clipped samples, on every METERING_STEP-th pixel."""
+    height, width = -(-frame.shape[0] // METERING_STEP), -(-frame.shape[1] // METERING_STEP)
+    return _meter(frame, response.decode(np.arange(256)), LUMA, _metering_weights(height, width))
+
+
 def metered_level(frame: np.ndarray, response: ResponseCurve) -> float:
-    """Centre-weighted mean linear luminance of an 8-bit frame (what the auto-exposure measures), from
-    every fourth pixel in each direction as camera pipelines meter on low-resolution statistics."""
-    linear = response.decode(frame[::4, ::4]) @ LUMA
-    return float((linear * _metering_weights(*linear.shape)).sum())
+    """Centre-weighted mean linear luminance of an 8-bit frame (what the auto-exposure measures)."""
+    return float(metering(frame, response)[0])
 
 
 @dataclass
@@ -249,7 +276,8 @@ class AutoExposure:
 
     def update(self, frame: np.ndarray, used: tuple[float, float]) -> None:
         """Meter a frame taken with `used` settings and steer the product for frames to come."""
-        level = max(metered_level(frame, self.response), 1e-4)
+        level, white, black = metering(frame, self.response)
+        level = max(level, 1e-4)
         used_product = used[0] * used[1] / self.sensor.base_iso
         wanted = used_product * self.sensor.target_grey / level
         s = self.sensor
@@ -258,10 +286,9 @@ class AutoExposure:
         # A mostly white (black) frame only bounds the right product from above (below): jump below
         # (above) that bound by clipped_step. Frames taken before earlier jumps (latency) repeat an old
         # bound and change nothing, so the jumps do not compound.
-        stats = frame[::4, ::4]  # the metering grid
-        if np.mean(stats >= 255) > 0.5:
+        if white > 0.5:
             self.product = float(np.clip(min(self.product, wanted / s.clipped_step), lo, hi))
-        elif np.mean(stats <= 0) > 0.5:
+        elif black > 0.5:
             self.product = float(np.clip(max(self.product, wanted * s.clipped_step), lo, hi))
         else:
             step = np.exp(s.convergence * np.log(wanted / self.product))
