@@ -136,6 +136,48 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------------------------
+# arsim capture
+
+
+def cmd_capture(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
+    from arsim.capture.response import response_error
+    from arsim.evaluate.capture_report import write_capture
+    from arsim.scenario.environment import load_environment
+    from arsim.sensors.camera import ResponseCurve
+
+    source = args.source
+    if source is not None and source.is_dir():
+        rec = load_recording(source)
+    else:
+        scenario = load_scenario(source)
+        scenario = dataclasses.replace(scenario, ar=dataclasses.replace(scenario.ar, enabled=False))  # the sweep only
+        recording_segments(scenario)
+        folder = _output_dir(args.output) / "recording"
+        with progress_bar("recording the capture sweep", 1.0) as update:
+            record(scenario, folder, progress=lambda f: update(completed=f))
+        rec = load_recording(folder)
+    out = _output_dir(args.output)
+    settings = CaptureSettings(size=args.size, align_every=args.align_every)
+    with progress_bar("capturing", 1.0) as update:
+        result = capture(rec, settings, progress=lambda f, c: update(completed=f, description=f"capturing: {100 * c:.1f} % covered"))
+    scenario = recording_scenario(rec)
+    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=args.size))
+    cam = scenario.device.camera
+    true_response = ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
+    metrics = write_capture(result, truth, response_error(result.response, true_response), out)
+    for warning in metrics["warnings"]:
+        print(f"warning: {warning}", file=sys.stderr)
+    print(f"captured {metrics['frames']} frames at {metrics['frames_per_second']:.1f} frames/s into {out / 'env.exr'}: "
+          f"{metrics['coverage_pct']:.2f} % covered; orientation error RMS {metrics['orientation_rms_deg_corrected']:.2f} degrees "
+          f"corrected, {metrics['orientation_rms_deg_uncorrected']:.2f} uncorrected; irradiance map error "
+          f"{metrics['irradiance_mean_err_pct']:.2f} %; metrics in {out / 'metrics.json'}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
 # arsim convert
 
 
@@ -335,6 +377,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help="scenario .toml (default: the embedded default scenario)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="recording folder (created if missing)")
     p.set_defaults(run=cmd_record)
+
+    p = _command(sub, "capture", "stitch a recording's frames into an HDR angle-map light probe, correcting the IMU's drift "
+                 "by feature alignment, and measure it against the truth (records the scenario's sweep first if given one)",
+                 "arsim capture rec -o capture   (or: arsim capture scenarios/indoor.toml -o capture)")
+    p.add_argument("source", type=Path, nargs="?", metavar="SCENARIO|RECORDING",
+                   help="a recording folder, or a scenario .toml to record first (default: the embedded default scenario)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("--size", type=_map_size, default=512, metavar="N", help="N of the captured N x N angle map (default 512)")
+    p.add_argument("--align-every", type=_positive_int("--align-every"), default=3, metavar="K",
+                   help="align every K-th frame against the probe (default 3)")
+    p.set_defaults(run=cmd_capture)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")

@@ -4,7 +4,7 @@ other tools to read, and read back with checks that explain what is wrong.
 A recording folder holds:
   meta.json          format version, seed, camera intrinsics, camera-to-device rotation, the scenario
   frames/NNNNNN.png  8-bit RGB frames;  frames.csv: t_ns, exposure_ns, iso, file
-  burst/NN.png       a bracketed burst at the start pose, auto-exposure off (for response calibration);
+  burst/NN.png       a bracketed burst around the auto-exposure, looking at the horizon (for response calibration);
                      burst.csv: exposure_ns, iso, file
   imu.csv            t_ns, sensor, x, y, z   (gyroscope rad/s, accelerometer m/s², magnetometer µT)
   orientation.csv    t_ns, qx, qy, qz, qw    (the fused device-to-world orientation the app reads)
@@ -16,6 +16,7 @@ A recording folder holds:
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -74,19 +75,31 @@ def _write_png(path: Path, frame: np.ndarray) -> None:
         tmp.write_bytes(png_bytes(frame))
 
 
-def _write_burst(out_dir: Path, camera: CameraRenderer, view: Rotation, scenario: Scenario) -> list[tuple]:
-    """Bracketed frames of one view at base ISO, the longest exposure the sensor allows divided by
-    burst_step per frame; returns the burst.csv rows."""
+BURST_METERING_FRAMES = 8  # unrecorded frames the burst's auto-exposure takes to settle at the start pose
+
+
+def _write_burst(out_dir: Path, camera: CameraRenderer, view: Rotation, scenario: Scenario,
+                 response: ResponseCurve) -> list[tuple]:
+    """A bracketed burst of one view (before the sweep), as phones take for HDR: the auto-exposure settles on the view
+    first (unrecorded frames, no latency), then the frames step by burst_step around its exposure
+    (time first, then ISO, within the sensor's limits; shifted down where the top would pass them).
+    Returns the burst.csv rows."""
     capture, sensor = scenario.capture, camera.sensor
     (out_dir / "burst").mkdir(exist_ok=True)
+    metering = AutoExposure(dataclasses.replace(sensor, latency_frames=0, convergence=1.0), response)
+    for k in range(BURST_METERING_FRAMES):
+        used = metering.next_frame_settings()
+        metering.update(camera.capture(view, *used, noise_key(scenario.run.seed, "burst", 1000 + k)), used)
+    # The bracket is shifted, not cut, where it would pass the sensor's longest product: frames stay distinct.
+    longest = sensor.exposure_range_s[1] * sensor.iso_range[1] / sensor.base_iso
+    top = min(metering.product * capture.burst_step ** ((capture.burst_frames - 1) / 2), longest)
     rows = []
-    longest = sensor.exposure_range_s[1]
     for k in range(capture.burst_frames):
-        exposure = max(longest / capture.burst_step ** (capture.burst_frames - 1 - k), sensor.exposure_range_s[0])
-        frame = camera.capture(view, exposure, sensor.base_iso, noise_key(scenario.run.seed, "burst", k))
+        exposure, iso = metering.settings(top / capture.burst_step ** (capture.burst_frames - 1 - k))
+        frame = camera.capture(view, exposure, iso, noise_key(scenario.run.seed, "burst", k))
         name = f"burst/{k:02d}.png"
         _write_png(out_dir / name, frame)
-        rows.append((int(round(exposure * 1e9)), sensor.base_iso, name))
+        rows.append((int(round(exposure * 1e9)), round(iso, 3), name))
     return rows
 
 
@@ -177,7 +190,9 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     response = ResponseCurve(cam.response, cam.gamma, cam.contrast)
     renderer = CameraRenderer(probe, camera, sensor, response, table=segment.table)
     ae = AutoExposure(sensor, response)
-    burst_rows = (_write_burst(out_dir, renderer, trajectory.camera_orientation([0.0], mount)[0], scenario)
+    # The burst looks where the sweep passes the horizon (mid-sweep): sky and ground, the widest range.
+    burst_view = trajectory.camera_orientation([trajectory.duration / 2], mount)[0]
+    burst_rows = (_write_burst(out_dir, renderer, burst_view, scenario, response)
                   if segment.burst else [])
     n_frames = frame_count(trajectory, cam.fps)
     rows = []

@@ -1,0 +1,161 @@
+"""Accumulation of camera frames into an HDR angle map (Kán's method): every texel whose direction
+falls inside a frame gets the frame's radiance there, weighted, and the probe is sum(w L) / sum(w).
+
+Weights per pixel and channel: a hat on the 8-bit code (well-exposed codes count most, 0 and 255 not
+at all) times a centre weight (the frame's vignetted edges and its rim count less). Samples are
+bilinear with the weights inside (sum of b w L / sum of b w over the four pixels), so a clipped
+neighbour never leaks into a texel. A texel only ever seen clipped keeps the largest lower bound of
+its radiance (the full-scale value of the shortest exposure that saw it) and is flagged as clipped.
+
+`ProbeAccumulator.add` runs compiled (numba, both cores); `accumulate_reference` is the NumPy oracle
+of one frame's contribution.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from arsim.core.conventions import CameraIntrinsics, anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
+
+
+def hat_weights() -> np.ndarray:
+    """Weight of each 8-bit code (256,): a triangle peaking at mid-grey, 0 at 0 and at 255."""
+    codes = np.arange(256, dtype=np.float64)
+    return np.minimum(codes, 255.0 - codes) / 127.5
+
+
+def centre_weights(camera: CameraIntrinsics, falloff: np.ndarray) -> np.ndarray:
+    """Weight of each pixel (H, W): its vignetting fall-off times a window that reaches 0 at the
+    frame's rim (so frames blend without seams)."""
+    y, x = np.mgrid[0:camera.height, 0:camera.width]
+    u = (x - camera.cx) / (camera.width / 2.0)
+    v = (y - camera.cy) / (camera.height / 2.0)
+    window = np.clip(1.0 - u * u, 0.0, 1.0) * np.clip(1.0 - v * v, 0.0, 1.0)
+    return (falloff * window).astype(np.float32)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _project(d0, d1, d2, fx, fy, cx, cy, k1, k2):
+    x, y = d0 / d2, d1 / d2
+    r2 = x * x + y * y
+    radial = 1.0 + k1 * r2 + k2 * r2 * r2
+    return fx * x * radial + cx, fy * y * radial + cy
+
+
+@numba.njit(cache=True, parallel=True, nogil=True)
+def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, codes, radiance_of_code, hat,
+                centre, sums, weights, bound):
+    """For every disk texel (directions (K, 3), at rows, cols of the maps) inside the frame: add the
+    weighted bilinear sample of the frame to sums and weights, or raise bound where the four pixels
+    are all clipped. radiance_of_code (256, 3): this frame's radiance per code before vignetting;
+    centre (H, W): the pixel weights, whose fall-off part is divided out of the radiance as well."""
+    fx, fy, cx, cy, k1, k2 = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3], intrinsics[4], intrinsics[5]
+    height, width = codes.shape[0], codes.shape[1]
+    m = world_to_camera
+    for k in numba.prange(directions.shape[0]):
+        w0, w1, w2 = directions[k, 0], directions[k, 1], directions[k, 2]
+        d2 = m[2, 0] * w0 + m[2, 1] * w1 + m[2, 2] * w2
+        if d2 < min_cos:  # outside the cone around the optical axis that holds the frame
+            continue
+        d0 = m[0, 0] * w0 + m[0, 1] * w1 + m[0, 2] * w2
+        d1 = m[1, 0] * w0 + m[1, 1] * w1 + m[1, 2] * w2
+        px, py = _project(d0, d1, d2, fx, fy, cx, cy, k1, k2)
+        if not (0.0 <= px <= width - 1 and 0.0 <= py <= height - 1):
+            continue
+        x0, y0 = min(int(px), width - 2), min(int(py), height - 2)
+        ax, ay = px - x0, py - y0
+        r, c = rows[k], cols[k]
+        for ch in range(3):
+            num, den, clipped = 0.0, 0.0, 0
+            for j in range(4):
+                x, y = x0 + (j & 1), y0 + (j >> 1)
+                b = (ax if j & 1 else 1.0 - ax) * (ay if j >> 1 else 1.0 - ay)
+                code = codes[y, x, ch]
+                w = b * hat[code] * centre[y, x, 0]
+                num += w * radiance_of_code[code, ch] / centre[y, x, 1]
+                den += w
+                clipped += code == 255
+            if den > 0.0:
+                sums[r, c, ch] += num
+                weights[r, c, ch] += den
+            elif clipped == 4:
+                lower = radiance_of_code[255, ch] / centre[y0, x0, 1]
+                if lower > bound[r, c, ch]:
+                    bound[r, c, ch] = lower
+
+
+class ProbeAccumulator:
+    """The N x N angle map being captured: running sums, weights and clipped lower bounds."""
+
+    def __init__(self, size: int, camera: CameraIntrinsics, falloff: np.ndarray):
+        self.size, self.camera = size, camera
+        inside = anglemap_disk_mask(size)
+        self.rows, self.cols = (a.astype(np.int32) for a in np.nonzero(inside))
+        self.directions = anglemap_directions(size)[inside].astype(np.float64)
+        # Per pixel: (centre weight, vignetting fall-off), as the kernel reads both at once.
+        self.centre = np.ascontiguousarray(np.stack([centre_weights(camera, falloff), falloff.astype(np.float32)], axis=-1))
+        self.intrinsics = np.array([camera.fx, camera.fy, camera.cx, camera.cy, camera.k1, camera.k2])
+        corners = camera.unproject(np.array([[0, 0], [camera.width - 1, 0], [0, camera.height - 1],
+                                             [camera.width - 1, camera.height - 1]], dtype=np.float64))
+        self.min_cos = float(corners[:, 2].min()) - 1e-3  # a little wider than the frame's corners
+        self.hat = hat_weights()
+        self.sums = np.zeros((size, size, 3))
+        self.weights = np.zeros((size, size, 3))
+        self.bound = np.zeros((size, size, 3))
+
+    def add(self, codes: np.ndarray, radiance_of_code: np.ndarray, camera_to_world: np.ndarray) -> None:
+        """Accumulate one frame: 8-bit codes (H, W, 3), its radiance per code before vignetting (256, 3),
+        and the camera-to-world rotation matrix it was taken with."""
+        _accumulate(self.directions, self.rows, self.cols, np.ascontiguousarray(np.asarray(camera_to_world).T),
+                    self.intrinsics, self.min_cos, codes, np.ascontiguousarray(radiance_of_code, dtype=np.float64),
+                    self.hat, self.centre, self.sums, self.weights, self.bound)
+
+    def probe(self) -> np.ndarray:
+        """The captured angle map (N, N, 3) float32: sum(w L) / sum(w); the lower bound where a texel was
+        only seen clipped; 0 where never seen."""
+        radiance = np.divide(self.sums, self.weights, out=np.zeros_like(self.sums), where=self.weights > 0)
+        return np.where(self.weights > 0, radiance, self.bound).astype(np.float32)
+
+    def covered(self) -> np.ndarray:
+        """(N, N) bool: texels with a value in every channel (measured, or a clipped lower bound)."""
+        return np.all((self.weights > 0) | (self.bound > 0), axis=-1)
+
+    def clipped_only(self) -> np.ndarray:
+        """(N, N) bool: texels where some channel is only a lower bound (always seen clipped)."""
+        return np.any((self.weights == 0) & (self.bound > 0), axis=-1)
+
+    def coverage(self) -> float:
+        """Fraction of the sphere's solid angle covered."""
+        omega = anglemap_solid_angles(self.size)
+        return float(omega[self.covered()].sum() / omega.sum())
+
+
+def accumulate_reference(size: int, camera: CameraIntrinsics, falloff: np.ndarray, codes: np.ndarray,
+                         radiance_of_code: np.ndarray, camera_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """NumPy oracle of one frame added to an empty accumulator: (sums, weights), each (N, N, 3)."""
+    inside = anglemap_disk_mask(size)
+    directions = anglemap_directions(size)[inside]
+    local = directions @ np.asarray(camera_to_world)  # world to camera: R^T d
+    sums, weights = np.zeros((size, size, 3)), np.zeros((size, size, 3))
+    front = local[:, 2] > 1e-9
+    px = np.full((len(local), 2), -1.0)
+    px[front] = camera.project(local[front])
+    ok = front & (px[:, 0] >= 0) & (px[:, 0] <= camera.width - 1) & (px[:, 1] >= 0) & (px[:, 1] <= camera.height - 1)
+    x0 = np.minimum(px[ok, 0].astype(int), camera.width - 2)
+    y0 = np.minimum(px[ok, 1].astype(int), camera.height - 2)
+    ax, ay = px[ok, 0] - x0, px[ok, 1] - y0
+    centre, hat = centre_weights(camera, falloff).astype(np.float64), hat_weights()
+    num, den = np.zeros((ok.sum(), 3)), np.zeros((ok.sum(), 3))
+    for dy in (0, 1):
+        for dx in (0, 1):
+            b = (ax if dx else 1 - ax) * (ay if dy else 1 - ay)
+            y, x = y0 + dy, x0 + dx
+            c = codes[y, x].astype(int)
+            w = b[:, None] * hat[c] * centre[y, x][:, None]
+            num += w * radiance_of_code[c, np.arange(3)] / falloff[y, x][:, None]
+            den += w
+    target = np.flatnonzero(inside.ravel())[ok]
+    sums.reshape(-1, 3)[target] = num
+    weights.reshape(-1, 3)[target] = den
+    return sums, weights

@@ -1,0 +1,130 @@
+"""The capture run: a recording's frames linearised with the calibrated response, aligned against the
+probe captured so far, and accumulated into the angle map; every orientation kept for evaluation."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from arsim.capture.accumulate import ProbeAccumulator
+from arsim.capture.align import Aligner
+from arsim.capture.response import RecoveredResponse, calibrate_response
+from arsim.core.errors import ArsimError
+from arsim.evaluate.recording_plots import frame_camera_orientations, recording_camera
+from arsim.scenario import Scenario
+from arsim.scenario.loader import parse_scenario
+from arsim.sensors.camera import SensorSettings, vignette
+from arsim.sensors.recording import Recording
+
+
+@dataclass(frozen=True)
+class CaptureSettings:
+    size: int = 512  # N of the captured N x N angle map
+    align_every: int = 3  # frames between alignments (0: never align)
+    correction_gain: float = 0.5  # fraction of a measured correction applied at once (smooth; 1 = all)
+
+
+class DriftCorrection:
+    """The world-frame rotation taking the IMU's orientation to the corrected one. Each successful
+    alignment moves it part of the way (gain) to what the alignment measured, so that single matches
+    do not jolt the orientation; a failed match changes nothing. (Extrapolating it at a fitted drift
+    rate was tried: the rate of a device-frame gyroscope bias, seen in the world frame, turns with the
+    sweep, and extrapolation over the featureless end of the sweep made the error worse.)"""
+
+    def __init__(self, gain: float):
+        self.gain = gain
+        self.rotation = Rotation.identity()
+
+    def update(self, measured: Rotation) -> None:
+        self.rotation = Slerp([0.0, 1.0], Rotation.concatenate([self.rotation, measured]))(self.gain)
+
+
+@dataclass
+class CaptureResult:
+    accumulator: ProbeAccumulator
+    response: RecoveredResponse
+    t_s: np.ndarray  # frame times (K,)
+    truth: Rotation  # true camera-to-world per frame
+    uncorrected: Rotation  # what the IMU's fused orientation says
+    corrected: Rotation  # with the feature-based correction
+    aligned: np.ndarray  # (K,) bool: an alignment succeeded at this frame
+    seconds: float  # processing time (reading frames included)
+
+    @property
+    def frames_per_second(self) -> float:
+        return len(self.t_s) / self.seconds
+
+
+def read_frame(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise ArsimError(f"{path}: cannot be read as an image; record again")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def recording_scenario(rec: Recording) -> Scenario:
+    """The scenario a recording was made from (its meta.json keeps it)."""
+    return parse_scenario(rec.meta["scenario_toml"], str(rec.folder / "meta.json"), rec.folder)
+
+
+def burst_response(rec: Recording, sensor: SensorSettings) -> RecoveredResponse:
+    if not rec.burst:
+        raise ArsimError(f"{rec.folder}: the recording has no response burst (burst.csv is empty); record it with "
+                         "[capture] burst_frames >= 2")
+    frames = [read_frame(rec.folder / b["file"]) for b in rec.burst]
+    products = np.array([b["exposure_ns"] / 1e9 * b["iso"] / sensor.base_iso for b in rec.burst])
+    return calibrate_response(frames, products)
+
+
+def fused_camera_orientations(rec: Recording) -> Rotation:
+    """The app's camera-to-world orientation at each frame time: the fused device orientation
+    (interpolated) times the camera mount."""
+    t_ns, fused = rec.orientation
+    t = np.clip([f["t_ns"] for f in rec.frames], t_ns[0], t_ns[-1])
+    return Slerp(t_ns.astype(np.float64), fused)(t.astype(np.float64)) * Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))
+
+
+def capture(rec: Recording, settings: CaptureSettings = CaptureSettings(),
+            progress: Callable[[float, float], None] = lambda fraction, coverage: None) -> CaptureResult:
+    """Run the capture on a recording; progress(fraction done, coverage so far)."""
+    if not rec.frames:
+        raise ArsimError(f"{rec.folder}: the recording has no frames; record a sweep first")
+    scenario = recording_scenario(rec)
+    sensor = SensorSettings.of(scenario.device.camera)
+    camera = recording_camera(rec)
+    falloff = vignette(camera.height, camera.width, sensor.vignetting)
+    response = burst_response(rec, sensor)
+    accumulator = ProbeAccumulator(settings.size, camera, falloff)
+    aligner = Aligner(camera, falloff, response, scenario.run.seed)
+    uncorrected, truth = fused_camera_orientations(rec), frame_camera_orientations(rec)
+    correction = DriftCorrection(settings.correction_gain)  # corrected = correction * uncorrected
+    corrected, aligned = [], np.zeros(len(rec.frames), dtype=bool)
+    start = time.perf_counter()
+    any_unclipped = False
+    with ThreadPoolExecutor(2) as readers:  # PNG decoding releases the GIL: read ahead
+        frames = readers.map(read_frame, [rec.folder / f["file"] for f in rec.frames])
+        for k, (info, codes) in enumerate(zip(rec.frames, frames)):
+            any_unclipped |= bool(np.any(codes < 255))
+            exposure_scale = info["exposure_ns"] / 1e9 * info["iso"] / sensor.base_iso * sensor.sensitivity
+            predicted = correction.rotation * uncorrected[k]
+            if settings.align_every and k % settings.align_every == 0 and k > 0:
+                found = aligner.align(codes, accumulator.probe(), accumulator.covered(), predicted.as_matrix(), exposure_scale)
+                if found.rotation is not None:
+                    correction.update(predicted * found.rotation * uncorrected[k].inv())
+                    aligned[k] = True
+                    predicted = correction.rotation * uncorrected[k]
+            corrected.append(predicted)
+            accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix())
+            if k % 30 == 0 or k == len(rec.frames) - 1:
+                progress((k + 1) / len(rec.frames), accumulator.coverage())
+    if not any_unclipped:
+        raise ArsimError(f"{rec.folder}: every frame is saturated (all codes 255); nothing can be captured from it")
+    return CaptureResult(accumulator, response, np.array([f["t_ns"] for f in rec.frames]) / 1e9, truth, uncorrected,
+                         Rotation.concatenate(corrected), aligned, time.perf_counter() - start)

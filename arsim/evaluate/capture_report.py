@@ -1,0 +1,155 @@
+"""What a capture run is measured by, against the truth: metrics.json, the captured and true probes as
+EXR, and the coverage, drift and probe-versus-truth plots."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from arsim.capture.pipeline import CaptureResult
+from arsim.core.conventions import anglemap_disk_mask, anglemap_solid_angles
+from arsim.core.files import write_text_atomic
+from arsim.core.hdr_io import write_image
+from arsim.evaluate.metrics import map_error
+from arsim.evaluate.recording_plots import _pyplot, _save
+from arsim.lighting.fast import fast_maps
+from arsim.sensors.camera import LUMA
+
+MAP_EXPONENTS = (1.0, 80.0)  # the irradiance map and a glossy reflection map
+BRIGHTEST_FRACTION = 0.1  # the brightest source: texels above this fraction of the truth's peak luminance
+
+
+def orientation_errors_deg(a: Rotation, b: Rotation) -> np.ndarray:
+    return np.degrees((a.inv() * b).magnitude())
+
+
+def filled(probe: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """The probe with uncovered disk texels filled from their covered surroundings (normalised
+    convolution at growing widths), so that maps can be computed from it."""
+    out = probe.astype(np.float32).copy()
+    have = covered.astype(np.float32)
+    sigma = 2.0
+    while (have < 1).any() and sigma < probe.shape[0]:
+        num = cv2.GaussianBlur(out * have[..., None], (0, 0), sigma)
+        den = cv2.GaussianBlur(have, (0, 0), sigma)
+        fill = (have < 1) & (den > 1e-3)
+        out[fill] = num[fill] / den[fill, None]
+        have = np.where(fill, 1.0, have)
+        sigma *= 2
+    return out * anglemap_disk_mask(probe.shape[0])[..., None]
+
+
+def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_error: dict) -> tuple[dict, np.ndarray]:
+    """metrics.json's content and the probe with its holes filled."""
+    acc = result.accumulator
+    n = acc.size
+    inside = anglemap_disk_mask(n)
+    probe, covered = acc.probe(), acc.covered() & inside
+    measured = covered & ~acc.clipped_only()
+    eps = 1e-4 * truth[inside].mean()
+    rel = np.abs(probe[measured] - truth[measured]) / (truth[measured] + eps)
+    complete = filled(probe, covered)
+    maps_probe, maps_truth = fast_maps(complete, MAP_EXPONENTS), fast_maps(truth, MAP_EXPONENTS)
+    map_err = [map_error(maps_truth[k][inside], maps_probe[k][inside]) for k in range(len(MAP_EXPONENTS))]
+    corrected = orientation_errors_deg(result.corrected, result.truth)
+    uncorrected = orientation_errors_deg(result.uncorrected, result.truth)
+    omega = anglemap_solid_angles(n)
+    luminance_truth, luminance_probe = truth @ LUMA, complete @ LUMA
+    brightest = inside & (luminance_truth >= BRIGHTEST_FRACTION * luminance_truth[inside].max())
+    ratio = float((luminance_probe[brightest] * omega[brightest]).sum() / (luminance_truth[brightest] * omega[brightest]).sum())
+    clipped = float((omega[brightest & acc.clipped_only()]).sum() / omega[brightest].sum())
+    metrics = {
+        "frames": len(result.t_s),
+        "frames_per_second": result.frames_per_second,
+        "coverage_pct": 100 * acc.coverage(),
+        "orientation_rms_deg_corrected": float(np.sqrt(np.mean(corrected**2))),
+        "orientation_max_deg_corrected": float(corrected.max()),
+        "orientation_rms_deg_uncorrected": float(np.sqrt(np.mean(uncorrected**2))),
+        "orientation_max_deg_uncorrected": float(uncorrected.max()),
+        "alignments_succeeded": int(result.aligned.sum()),
+        "radiance_median_abs_rel_err_pct": float(100 * np.median(rel)),
+        "radiance_mean_abs_rel_err_pct": float(100 * rel.mean()),
+        "irradiance_mean_err_pct": map_err[0].mean_percent,
+        "reflection_s80_mean_err_pct": map_err[1].mean_percent,
+        "response_median_err_pct": true_response_error["median_pct"],
+        "response_max_err_pct": true_response_error["max_pct"],
+        "brightest_source_ratio": ratio,
+        "brightest_source_clipped_pct": 100 * clipped,
+    }
+    return metrics, complete
+
+
+def brightest_warning(metrics: dict) -> str | None:
+    if metrics["brightest_source_clipped_pct"] > 1.0 and metrics["brightest_source_ratio"] < 0.8:
+        return (f"the brightest source was clipped in every frame that saw {metrics['brightest_source_clipped_pct']:.0f} % of it: "
+                f"its captured radiance is a lower bound, {100 * metrics['brightest_source_ratio']:.1f} % of the truth "
+                "(the auto-exposure never exposed for it); see probe_vs_truth.png")
+    return None
+
+
+def plot_drift(result: CaptureResult, path: Path) -> Path:
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    ax.plot(result.t_s, orientation_errors_deg(result.uncorrected, result.truth), label="IMU only (uncorrected)")
+    ax.plot(result.t_s, orientation_errors_deg(result.corrected, result.truth), label="with feature alignment")
+    ax.scatter(result.t_s[result.aligned], np.zeros(result.aligned.sum()), s=2, color="tab:green", label="alignment succeeded")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("camera orientation error (degrees)")
+    ax.set_title("Drift of the capture's orientation against the truth")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    return _save(fig, path)
+
+
+def plot_coverage_map(result: CaptureResult, path: Path) -> Path:
+    plt = _pyplot()
+    acc = result.accumulator
+    weight = acc.weights.mean(axis=-1)
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    shown = np.where(anglemap_disk_mask(acc.size), np.log10(1 + weight), np.nan)
+    image = ax.imshow(shown, cmap="magma")
+    ax.contour(acc.clipped_only(), levels=[0.5], colors="cyan", linewidths=0.7)
+    fig.colorbar(image, ax=ax, label="log10(1 + sum of weights)")
+    ax.set_title(f"Captured weight per texel; {100 * acc.coverage():.2f} % covered\n(cyan: only ever seen clipped)")
+    ax.axis("off")
+    return _save(fig, path)
+
+
+def plot_probe_vs_truth(probe: np.ndarray, truth: np.ndarray, path: Path) -> Path:
+    plt = _pyplot()
+    inside = anglemap_disk_mask(probe.shape[0])
+    scale = 0.18 / max(float(np.median((truth @ LUMA)[inside])), 1e-12)  # the same exposure for both
+
+    def shown(x):
+        return np.clip((x * scale) ** (1 / 2.2), 0, 1)
+
+    rel = np.where(inside, np.abs(probe @ LUMA - truth @ LUMA) / (truth @ LUMA + 1e-4 * (truth @ LUMA)[inside].mean()), np.nan)
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.8))
+    axes[0].imshow(shown(probe))
+    axes[0].set_title("captured")
+    axes[1].imshow(shown(truth))
+    axes[1].set_title("truth")
+    image = axes[2].imshow(100 * rel, cmap="viridis", vmin=0, vmax=20)
+    axes[2].set_title("relative error of luminance (%)")
+    fig.colorbar(image, ax=axes[2], label="%")
+    for ax in axes:
+        ax.axis("off")
+    return _save(fig, path)
+
+
+def write_capture(result: CaptureResult, truth: np.ndarray, response_error: dict, out_dir: Path) -> dict:
+    """Everything `arsim capture` writes into out_dir; returns the metrics."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    metrics, complete = capture_metrics(result, truth, response_error)
+    write_image(out_dir / "env.exr", result.accumulator.probe())
+    write_image(out_dir / "truth.exr", truth)
+    plot_coverage_map(result, out_dir / "coverage.png")
+    plot_drift(result, out_dir / "drift.png")
+    plot_probe_vs_truth(complete, truth, out_dir / "probe_vs_truth.png")
+    warning = brightest_warning(metrics)
+    write_text_atomic(out_dir / "metrics.json", json.dumps(metrics | {"warnings": [warning] if warning else []}, indent=2) + "\n")
+    return metrics | {"warnings": [warning] if warning else []}
