@@ -1,0 +1,184 @@
+"""The capture stage: compiled accumulation against its NumPy oracle, a perfect sensor reproducing the
+truth, alignment finding a known rotation, featureless frames changing nothing, and bad inputs."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from arsim.capture.accumulate import ProbeAccumulator, accumulate_reference
+from arsim.capture.align import Aligner
+from arsim.capture.response import RecoveredResponse, calibrate_response, response_error
+from arsim.core.conventions import CameraIntrinsics, anglemap_directions, anglemap_disk_mask
+from arsim.core.hdr_io import read_hdr
+from arsim.core.resample import to_layout
+from arsim.sensors.camera import ResponseCurve
+from arsim.sensors.trajectory import CaptureSweep
+from arsim.sensors.views import environment_view_reference
+from tests.conftest import ENVMAPS
+from tests.test_cli import arsim, assert_one_line_error
+
+TRUE_CURVE = ResponseCurve()
+
+
+def ideal_frame(probe, camera, rotation, exposure_scale):
+    """Noise-free 8-bit frame without vignetting: the true curve applied to radiance x exposure."""
+    radiance = environment_view_reference(probe, camera, rotation)
+    return TRUE_CURVE.encode(radiance * exposure_scale), radiance
+
+
+def ideal_response():
+    return RecoveredResponse(np.repeat(TRUE_CURVE.decode(np.arange(256))[:, None], 3, axis=1))
+
+
+def test_compiled_accumulation_equals_the_numpy_oracle():
+    camera = CameraIntrinsics.from_fov(120, 90, 70.0, k1=-0.05, k2=0.01)
+    falloff = np.linspace(0.7, 1.0, 120 * 90).reshape(90, 120)
+    codes = np.random.default_rng(1).integers(0, 256, (90, 120, 3), dtype=np.uint8)
+    codes[:20] = 255  # clipped rows
+    radiance_of_code = np.random.default_rng(2).random((256, 3)) + 0.1
+    rotation = Rotation.from_euler("xyz", [20, -130, 5], degrees=True).as_matrix()
+    acc = ProbeAccumulator(64, camera, falloff)
+    acc.add(codes, radiance_of_code, rotation)
+    sums, weights = accumulate_reference(64, camera, falloff, codes, radiance_of_code, rotation)
+    assert weights.sum() > 0 and (weights > 0).sum() > 100
+    np.testing.assert_allclose(acc.weights, weights, rtol=1e-4, atol=1e-12)
+    np.testing.assert_allclose(acc.sums, sums, rtol=1e-4, atol=1e-12)
+    assert acc.clipped_only().any()  # texels behind the clipped rows keep a lower bound only
+
+
+def smooth_environment(n):
+    """A positive environment smooth at the scale of a texel (so that resampling it into frames and back
+    is exact to well below 1 %), with a 20:1 range."""
+    d = anglemap_directions(n)
+    base = 1.0 + 0.6 * d[..., 0] + 0.3 * d[..., 1] ** 2 + 0.25 * np.sin(3.0 * d[..., 2])
+    probe = np.stack([base, 0.8 * base + 0.2 * d[..., 1] ** 2, 1.2 * base], axis=-1) ** 2
+    return (probe * anglemap_disk_mask(n)[..., None]).astype(np.float32)
+
+
+def test_perfect_sensor_and_ideal_camera_reproduce_the_truth():
+    """No noise, no vignetting, the true response, the true orientations: the covered texels are the
+    truth within 1 % (8-bit quantisation averaged over the frames that saw each texel)."""
+    probe = smooth_environment(64)
+    camera = CameraIntrinsics.from_fov(320, 240, 60.0)
+    acc = ProbeAccumulator(64, camera, np.ones((240, 320)))
+    inside = anglemap_disk_mask(64)
+    for rotation in CaptureSweep().camera_orientation(np.linspace(0, 60, 120)):
+        radiance = environment_view_reference(probe, camera, rotation)
+        scale = 0.18 / max(float(np.median(radiance.mean(axis=-1))), 1e-9)  # an exact auto-exposure
+        acc.add(TRUE_CURVE.encode(radiance * scale), ideal_response().linear / scale, rotation.as_matrix())
+    measured = acc.covered() & inside
+    assert acc.coverage() > 0.95 and not acc.clipped_only().any()
+    rel = np.abs(acc.probe()[measured] - probe[measured]) / probe[measured]
+    assert rel.mean() < 0.01 and np.median(rel) < 0.005
+
+
+@pytest.fixture(scope="module")
+def detailed_probe():
+    return to_layout(read_hdr(ENVMAPS[1]), "anglemap", 512)
+
+
+@pytest.mark.parametrize("offset_deg", [[0.0, 1.5, 0.0], [0.8, -0.6, 0.4]])
+def test_alignment_finds_a_known_rotation(detailed_probe, offset_deg):
+    camera = CameraIntrinsics.from_fov(640, 480, 60.0)
+    truth = Rotation.from_euler("yx", [40, -10], degrees=True)
+    radiance = environment_view_reference(detailed_probe, camera, truth)
+    scale = 0.18 / float(np.median(radiance.mean(axis=-1)))
+    frame = TRUE_CURVE.encode(radiance * scale)
+    predicted = truth * Rotation.from_euler("xyz", offset_deg, degrees=True)
+    aligner = Aligner(camera, np.ones((480, 640)), ideal_response())
+    found = aligner.align(frame, detailed_probe, np.ones((512, 512), bool), predicted.as_matrix(), scale)
+    assert found.rotation is not None and found.inliers >= 20
+    error = np.degrees(((predicted * found.rotation).inv() * truth).magnitude())
+    assert error < 0.1
+
+
+def test_a_featureless_frame_changes_nothing():
+    camera = CameraIntrinsics.from_fov(640, 480, 60.0)
+    probe = np.full((128, 128, 3), 0.5, np.float32) * anglemap_disk_mask(128)[..., None]
+    frame = np.full((480, 640, 3), 128, np.uint8)
+    aligner = Aligner(camera, np.ones((480, 640)), ideal_response())
+    found = aligner.align(frame, probe, anglemap_disk_mask(128), Rotation.identity().as_matrix(), 1.0)
+    assert found.rotation is None
+
+
+def test_robertson_recovers_the_response_from_a_burst(detailed_probe):
+    camera = CameraIntrinsics.from_fov(320, 240, 60.0)
+    view = Rotation.from_euler("y", 100, degrees=True)
+    radiance = environment_view_reference(detailed_probe, camera, view)
+    base = 0.18 / float(np.median(radiance.mean(axis=-1)))
+    products = base * 2.0 ** np.arange(-3, 4)
+    frames = [TRUE_CURVE.encode(radiance * p) for p in products]
+    error = response_error(calibrate_response(frames, products), TRUE_CURVE.decode(np.arange(256)))
+    assert error["median_pct"] < 3 and error["max_pct"] < 10
+
+
+SHORT = """
+[environment]
+map = "envmaps/courtyard.exr"
+probe_size = 128
+[capture]
+duration_s = 2.0
+[device.camera]
+width = 96
+height = 72
+[ar]
+enabled = false
+"""
+
+
+@pytest.fixture(scope="module")
+def short_recording(tmp_path_factory):
+    root = tmp_path_factory.mktemp("capture")
+    (root / "short.toml").write_text(SHORT)
+    r = arsim("record", root / "short.toml", "-o", root / "rec")
+    assert r.returncode == 0, r.stderr
+    return root / "rec"
+
+
+def test_capture_of_a_short_recording_writes_every_output(short_recording, tmp_path):
+    import json
+
+    r = arsim("capture", short_recording, "-o", tmp_path / "out", "--size", "64")
+    assert r.returncode == 0, r.stderr
+    for name in ("env.exr", "truth.exr", "coverage.png", "drift.png", "probe_vs_truth.png", "metrics.json"):
+        assert (tmp_path / "out" / name).exists(), name
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    for key in ("coverage_pct", "orientation_rms_deg_corrected", "orientation_rms_deg_uncorrected",
+                "irradiance_mean_err_pct", "frames_per_second"):
+        assert np.isfinite(metrics[key]), key
+    assert 0 < metrics["coverage_pct"] <= 100
+
+
+def _copy(recording, tmp_path):
+    import shutil
+
+    return shutil.copytree(recording, tmp_path / "rec")
+
+
+def test_a_recording_without_frames_is_refused(short_recording, tmp_path):
+    rec = _copy(short_recording, tmp_path)
+    for png in (rec / "frames").glob("*.png"):
+        png.unlink()
+    (rec / "frames.csv").write_text("t_ns,exposure_ns,iso,file\n")
+    r = arsim("capture", rec, "-o", tmp_path / "out")
+    assert_one_line_error(r, "no frames")
+    assert not (tmp_path / "out" / "env.exr").exists()
+
+
+def test_a_recording_without_a_burst_is_refused(short_recording, tmp_path):
+    rec = _copy(short_recording, tmp_path)
+    (rec / "burst.csv").write_text("exposure_ns,iso,file\n")
+    r = arsim("capture", rec, "-o", tmp_path / "out")
+    assert_one_line_error(r, "no response burst")
+    assert not (tmp_path / "out" / "env.exr").exists()
+
+
+def test_saturated_frames_are_refused(short_recording, tmp_path):
+    import cv2
+
+    rec = _copy(short_recording, tmp_path)
+    for png in (rec / "frames").glob("*.png"):
+        cv2.imwrite(str(png), np.full((72, 96, 3), 255, np.uint8))
+    r = arsim("capture", rec, "-o", tmp_path / "out")
+    assert_one_line_error(r, "saturated")
+    assert not (tmp_path / "out" / "env.exr").exists()
