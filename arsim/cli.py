@@ -160,11 +160,11 @@ def cmd_capture(args: argparse.Namespace) -> int:
             record(scenario, folder, progress=lambda f: update(completed=f))
         rec = load_recording(folder)
     out = _output_dir(args.output)
-    settings = CaptureSettings(size=args.size, align_every=args.align_every)
+    scenario = recording_scenario(rec)
+    settings = CaptureSettings.of(scenario, args.size, args.align_every)
     with progress_bar("capturing", 1.0) as update:
         result = capture(rec, settings, progress=lambda f, c: update(completed=f, description=f"capturing: {100 * c:.1f} % covered"))
-    scenario = recording_scenario(rec)
-    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=args.size))
+    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=settings.size))
     cam = scenario.device.camera
     true_response = ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
     metrics = write_capture(result, truth, response_error(result.response, true_response), out)
@@ -384,9 +384,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("source", type=Path, nargs="?", metavar="SCENARIO|RECORDING",
                    help="a recording folder, or a scenario .toml to record first (default: the embedded default scenario)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
-    p.add_argument("--size", type=_map_size, default=512, metavar="N", help="N of the captured N x N angle map (default 512)")
-    p.add_argument("--align-every", type=_positive_int("--align-every"), default=3, metavar="K",
-                   help="align every K-th frame against the probe (default 3)")
+    p.add_argument("--size", type=_map_size, metavar="N", help="N of the captured N x N angle map (default: [capture] capture_size, 512)")
+    p.add_argument("--align-every", type=_positive_int("--align-every"), metavar="K",
+                   help="align every K-th metered frame against the probe (default: [capture] align_every, 1)")
     p.set_defaults(run=cmd_capture)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",

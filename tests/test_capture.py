@@ -38,8 +38,8 @@ def test_compiled_accumulation_equals_the_numpy_oracle():
     radiance_of_code = np.random.default_rng(2).random((256, 3)) + 0.1
     rotation = Rotation.from_euler("xyz", [20, -130, 5], degrees=True).as_matrix()
     acc = ProbeAccumulator(64, camera, falloff)
-    acc.add(codes, radiance_of_code, rotation)
-    sums, weights = accumulate_reference(64, camera, falloff, codes, radiance_of_code, rotation)
+    acc.add(codes, radiance_of_code, rotation, 0.37)
+    sums, weights = accumulate_reference(64, camera, falloff, codes, radiance_of_code, rotation, 0.37)
     assert weights.sum() > 0 and (weights > 0).sum() > 100
     np.testing.assert_allclose(acc.weights, weights, rtol=1e-4, atol=1e-12)
     np.testing.assert_allclose(acc.sums, sums, rtol=1e-4, atol=1e-12)

@@ -2,10 +2,16 @@
 falls inside a frame gets the frame's radiance there, weighted, and the probe is sum(w L) / sum(w).
 
 Weights per pixel and channel: a hat on the 8-bit code (well-exposed codes count most, 0 and 255 not
-at all) times a centre weight (the frame's vignetted edges and its rim count less). Samples are
-bilinear with the weights inside (sum of b w L / sum of b w over the four pixels), so a clipped
-neighbour never leaks into a texel. A texel only ever seen clipped keeps the largest lower bound of
-its radiance (the full-scale value of the shortest exposure that saw it) and is flagged as clipped.
+at all) times a centre weight (the frame's vignetted edges and its rim count less) times the frame's
+trust, the square of its exposure (one code step is a radiance step inversely proportional to the
+exposure: the weight is the inverse of that quantisation variance). A frame bracketed 14 EV down for
+the highlights thus adds nothing measurable where a metered frame saw the scene well, and is all
+there is where every metered frame clipped. Samples are
+bilinear with the weights inside (sum of b w L / sum of b w over the four pixels); where any of the
+four pixels is clipped the frame adds nothing there (the texel may be as bright as the clipped pixel,
+and its unclipped neighbours would understate it: a lamp's core would take the value of its rim). A
+texel only ever seen clipped keeps the largest lower bound of its radiance (the full-scale value of
+the shortest exposure that saw it) and is flagged as clipped.
 
 `ProbeAccumulator.add` runs compiled (numba, both cores); `accumulate_reference` is the NumPy oracle
 of one frame's contribution.
@@ -45,10 +51,10 @@ def _project(d0, d1, d2, fx, fy, cx, cy, k1, k2):
 
 @numba.njit(cache=True, parallel=True, nogil=True)
 def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, codes, radiance_of_code, hat,
-                centre, sums, weights, bound):
+                centre, trust, sums, weights, bound):
     """For every disk texel (directions (K, 3), at rows, cols of the maps) inside the frame: add the
-    weighted bilinear sample of the frame to sums and weights, or raise bound where the four pixels
-    are all clipped. radiance_of_code (256, 3): this frame's radiance per code before vignetting;
+    weighted bilinear sample of the frame to sums and weights, or raise bound where any of the four
+    pixels is clipped. radiance_of_code (256, 3): this frame's radiance per code before vignetting;
     centre (H, W): the pixel weights, whose fall-off part is divided out of the radiance as well."""
     fx, fy, cx, cy, k1, k2 = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3], intrinsics[4], intrinsics[5]
     height, width = codes.shape[0], codes.shape[1]
@@ -72,14 +78,15 @@ def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, co
                 x, y = x0 + (j & 1), y0 + (j >> 1)
                 b = (ax if j & 1 else 1.0 - ax) * (ay if j >> 1 else 1.0 - ay)
                 code = codes[y, x, ch]
-                w = b * hat[code] * centre[y, x, 0]
+                w = b * hat[code] * centre[y, x, 0] * trust
                 num += w * radiance_of_code[code, ch] / centre[y, x, 1]
                 den += w
                 clipped += code == 255
-            if den > 0.0:
-                sums[r, c, ch] += num
-                weights[r, c, ch] += den
-            elif clipped == 4:
+            if clipped == 0:
+                if den > 0.0:
+                    sums[r, c, ch] += num
+                    weights[r, c, ch] += den
+            else:  # a texel next to clipped pixels may be as bright: its unclipped neighbours would understate it
                 lower = radiance_of_code[255, ch] / centre[y0, x0, 1]
                 if lower > bound[r, c, ch]:
                     bound[r, c, ch] = lower
@@ -104,12 +111,12 @@ class ProbeAccumulator:
         self.weights = np.zeros((size, size, 3))
         self.bound = np.zeros((size, size, 3))
 
-    def add(self, codes: np.ndarray, radiance_of_code: np.ndarray, camera_to_world: np.ndarray) -> None:
+    def add(self, codes: np.ndarray, radiance_of_code: np.ndarray, camera_to_world: np.ndarray, trust: float = 1.0) -> None:
         """Accumulate one frame: 8-bit codes (H, W, 3), its radiance per code before vignetting (256, 3),
-        and the camera-to-world rotation matrix it was taken with."""
+        the camera-to-world rotation matrix it was taken with, and its trust (exposure squared)."""
         _accumulate(self.directions, self.rows, self.cols, np.ascontiguousarray(np.asarray(camera_to_world).T),
                     self.intrinsics, self.min_cos, codes, np.ascontiguousarray(radiance_of_code, dtype=np.float64),
-                    self.hat, self.centre, self.sums, self.weights, self.bound)
+                    self.hat, self.centre, float(trust), self.sums, self.weights, self.bound)
 
     def probe(self) -> np.ndarray:
         """The captured angle map (N, N, 3) float32: sum(w L) / sum(w); the lower bound where a texel was
@@ -132,7 +139,8 @@ class ProbeAccumulator:
 
 
 def accumulate_reference(size: int, camera: CameraIntrinsics, falloff: np.ndarray, codes: np.ndarray,
-                         radiance_of_code: np.ndarray, camera_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                         radiance_of_code: np.ndarray, camera_to_world: np.ndarray,
+                         trust: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """NumPy oracle of one frame added to an empty accumulator: (sums, weights), each (N, N, 3)."""
     inside = anglemap_disk_mask(size)
     directions = anglemap_directions(size)[inside]
@@ -146,15 +154,17 @@ def accumulate_reference(size: int, camera: CameraIntrinsics, falloff: np.ndarra
     y0 = np.minimum(px[ok, 1].astype(int), camera.height - 2)
     ax, ay = px[ok, 0] - x0, px[ok, 1] - y0
     centre, hat = centre_weights(camera, falloff).astype(np.float64), hat_weights()
-    num, den = np.zeros((ok.sum(), 3)), np.zeros((ok.sum(), 3))
+    num, den, clipped = np.zeros((ok.sum(), 3)), np.zeros((ok.sum(), 3)), np.zeros((ok.sum(), 3), bool)
     for dy in (0, 1):
         for dx in (0, 1):
             b = (ax if dx else 1 - ax) * (ay if dy else 1 - ay)
             y, x = y0 + dy, x0 + dx
             c = codes[y, x].astype(int)
-            w = b[:, None] * hat[c] * centre[y, x][:, None]
+            w = b[:, None] * hat[c] * centre[y, x][:, None] * trust
             num += w * radiance_of_code[c, np.arange(3)] / falloff[y, x][:, None]
             den += w
+            clipped |= c == 255
+    num[clipped], den[clipped] = 0.0, 0.0  # next to a clipped pixel a frame says nothing
     target = np.flatnonzero(inside.ravel())[ok]
     sums.reshape(-1, 3)[target] = num
     weights.reshape(-1, 3)[target] = den

@@ -27,8 +27,15 @@ from arsim.sensors.recording import Recording
 @dataclass(frozen=True)
 class CaptureSettings:
     size: int = 512  # N of the captured N x N angle map
-    align_every: int = 3  # frames between alignments (0: never align)
+    align_every: int = 1  # metered frames between alignments (0: never align)
     correction_gain: float = 0.5  # fraction of a measured correction applied at once (smooth; 1 = all)
+
+    @classmethod
+    def of(cls, scenario: Scenario, size: int | None = None, align_every: int | None = None) -> CaptureSettings:
+        """The scenario's [capture] settings, with the command line's overrides where given."""
+        c = scenario.capture
+        return cls(c.capture_size if size is None else size, c.align_every if align_every is None else align_every,
+                   c.correction_gain)
 
 
 class DriftCorrection:
@@ -91,12 +98,15 @@ def fused_camera_orientations(rec: Recording) -> Rotation:
     return Slerp(t_ns.astype(np.float64), fused)(t.astype(np.float64)) * Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))
 
 
-def capture(rec: Recording, settings: CaptureSettings = CaptureSettings(),
+def capture(rec: Recording, settings: CaptureSettings | None = None,
             progress: Callable[[float, float], None] = lambda fraction, coverage: None) -> CaptureResult:
-    """Run the capture on a recording; progress(fraction done, coverage so far)."""
+    """Run the capture on a recording (settings: the recording's scenario's unless given);
+    progress(fraction done, coverage so far)."""
     if not rec.frames:
         raise ArsimError(f"{rec.folder}: the recording has no frames; record a sweep first")
     scenario = recording_scenario(rec)
+    settings = settings or CaptureSettings.of(scenario)
+    bracket = scenario.capture.bracket_ev  # frame k was taken at offset bracket[k % len]; 0: metered
     sensor = SensorSettings.of(scenario.device.camera)
     camera = recording_camera(rec)
     falloff = vignette(camera.height, camera.width, sensor.vignetting)
@@ -114,14 +124,16 @@ def capture(rec: Recording, settings: CaptureSettings = CaptureSettings(),
             any_unclipped |= bool(np.any(codes < 255))
             exposure_scale = info["exposure_ns"] / 1e9 * info["iso"] / sensor.base_iso * sensor.sensitivity
             predicted = correction.rotation * uncorrected[k]
-            if settings.align_every and k % settings.align_every == 0 and k > 0:
+            metered, index = divmod(k, len(bracket))
+            # Only metered frames are aligned: the bracketed ones are dark but for the highlights.
+            if settings.align_every and index == 0 and metered % settings.align_every == 0 and k > 0:
                 found = aligner.align(codes, accumulator.probe(), accumulator.covered(), predicted.as_matrix(), exposure_scale)
                 if found.rotation is not None:
                     correction.update(predicted * found.rotation * uncorrected[k].inv())
                     aligned[k] = True
                     predicted = correction.rotation * uncorrected[k]
             corrected.append(predicted)
-            accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix())
+            accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale**2)
             if k % 30 == 0 or k == len(rec.frames) - 1:
                 progress((k + 1) / len(rec.frames), accumulator.coverage())
     if not any_unclipped:

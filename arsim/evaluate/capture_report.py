@@ -110,10 +110,12 @@ def plot_coverage_map(result: CaptureResult, path: Path) -> Path:
     acc = result.accumulator
     weight = acc.weights.mean(axis=-1)
     fig, ax = plt.subplots(figsize=(5.5, 5))
-    shown = np.where(anglemap_disk_mask(acc.size), np.log10(1 + weight), np.nan)
-    image = ax.imshow(shown, cmap="magma")
+    seen = weight > 0
+    relative = np.where(seen, weight / (weight[seen].max() if seen.any() else 1.0), np.nan)
+    shown = np.where(anglemap_disk_mask(acc.size) & seen, np.log10(np.maximum(relative, 1e-6)), np.nan)
+    image = ax.imshow(shown, cmap="magma", vmin=-6, vmax=0)
     ax.contour(acc.clipped_only(), levels=[0.5], colors="cyan", linewidths=0.7)
-    fig.colorbar(image, ax=ax, label="log10(1 + sum of weights)")
+    fig.colorbar(image, ax=ax, label="log10 of the sum of weights (relative to the largest)")
     ax.set_title(f"Captured weight per texel; {100 * acc.coverage():.2f} % covered\n(cyan: only ever seen clipped)")
     ax.axis("off")
     return _save(fig, path)

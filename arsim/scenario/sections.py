@@ -128,6 +128,13 @@ class CaptureSection:
     burst_frames: int = setting(7, min=0, max=64, unit="frames",
                                 help="bracketed burst at the start pose for response calibration (0: none)")
     burst_step: float = setting(2.0, min=1.01, max=16.0, help="exposure ratio between burst frames")
+    bracket_ev: tuple[float, ...] = setting((0.0, -7.0, -14.0), min=-30.0, max=30.0, unit="EV",
+                                            help="exposure offsets the sweep's frames cycle through, the first 0 "
+                                                 "(metered; the others capture highlights)")
+    align_every: int = setting(1, min=0, max=1000, unit="frames",
+                               help="capture: align every K-th metered frame against the probe (0: never)")
+    correction_gain: float = setting(0.5, min=0.01, max=1.0, help="capture: share of a measured drift correction applied at once")
+    capture_size: int = setting(512, min=16, max=4096, unit="texels", help="capture: N of the captured N x N angle map")
 
 
 @dataclass(frozen=True)

@@ -136,13 +136,18 @@ class _Segment:
     imu_seed: int  # the IMU streams' generator key, distinct per segment
     burst: bool
     folder: str  # relative to the recording ("" for the recording's own files)
+    bracket_ev: tuple[float, ...] = (0.0,)  # exposure offsets the frames cycle through (0: metered)
 
 
 def recording_segments(scenario: Scenario) -> list[_Segment]:
     """What `record` will write; raises ArsimError for settings that do not fit together (call it
     before creating any output)."""
     SensorSettings.of(scenario.device.camera).check()
-    segments = [_Segment("capture", capture_sweep(scenario), None, 1, True, "")]
+    bracket = scenario.capture.bracket_ev
+    if not bracket or bracket[0] != 0.0:
+        raise ArsimError(f"[capture] bracket_ev = {list(bracket)}: the first offset must be 0 (the metered exposure), "
+                         "e.g. [0.0, -7.0, -14.0]")
+    segments = [_Segment("capture", capture_sweep(scenario), None, 1, True, "", bracket)]
     if scenario.ar.enabled:
         segments.append(_Segment("ar", ar_path(scenario), Table.of(scenario.ar), 4, False, "ar"))
     return segments
@@ -202,8 +207,14 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
         pending: deque = deque()
         for k in range(n_frames):
             used = ae.next_frame_settings()
+            # Bracketed frames (for highlights) take the metered exposure times 2^ev; only metered
+            # frames steer the auto-exposure.
+            ev = segment.bracket_ev[k % len(segment.bracket_ev)]
+            if ev:
+                used = ae.settings(used[0] * used[1] / sensor.base_iso * 2.0**ev)
             frame = renderer.capture(views[k], *used, noise_key(seed, segment.name, k), positions[k])
-            ae.update(frame, used)
+            if not ev:
+                ae.update(frame, used)
             name = f"{k:06d}.png"
             pending.append(writers.submit(_write_png, out_dir / "frames" / name, frame))
             while len(pending) > MAX_PENDING_FRAMES:  # bounded: frames waiting to be written hold memory
