@@ -17,7 +17,7 @@ from arsim.capture.response import RecoveredResponse
 from arsim.core.conventions import CameraIntrinsics
 
 SCALE = 0.5  # alignment images are this fraction of the frame's size
-MIN_INLIERS = 12
+MIN_INLIERS = 6
 INLIER_DEG = 0.25  # a match agrees with a rotation when their bearings differ by less than this
 RANSAC_ITERATIONS = 200
 MIN_COVERED = 0.3  # fraction of the predicted view the probe must cover for a match to be tried

@@ -24,6 +24,9 @@ from arsim.sensors.camera import SensorSettings, vignette
 from arsim.sensors.recording import Recording
 
 
+GATE_DEG, GATE_DEG_PER_S = 0.5, 0.5  # largest plausible correction: this much, plus this much per second unaligned
+
+
 @dataclass(frozen=True)
 class CaptureSettings:
     size: int = 512  # N of the captured N x N angle map
@@ -116,6 +119,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     uncorrected, truth = fused_camera_orientations(rec), frame_camera_orientations(rec)
     correction = DriftCorrection(settings.correction_gain)  # corrected = correction * uncorrected
     corrected, aligned = [], np.zeros(len(rec.frames), dtype=bool)
+    times, last_aligned_t = np.array([f["t_ns"] for f in rec.frames]) / 1e9, 0.0
     start = time.perf_counter()
     any_unclipped = False
     with ThreadPoolExecutor(2) as readers:  # PNG decoding releases the GIL: read ahead
@@ -128,7 +132,11 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
             # Only metered frames are aligned: the bracketed ones are dark but for the highlights.
             if settings.align_every and index == 0 and metered % settings.align_every == 0 and k > 0:
                 found = aligner.align(codes, accumulator.probe(), accumulator.covered(), predicted.as_matrix(), exposure_scale)
-                if found.rotation is not None:
+                # A match that would turn the view by more than the IMU can have drifted since the last
+                # one is a false match (few features, repeated patterns): it is dropped like a failed one.
+                plausible = np.radians(GATE_DEG + GATE_DEG_PER_S * (times[k] - last_aligned_t))
+                if found.rotation is not None and found.rotation.magnitude() <= plausible:
+                    last_aligned_t = times[k]
                     correction.update(predicted * found.rotation * uncorrected[k].inv())
                     aligned[k] = True
                     predicted = correction.rotation * uncorrected[k]
