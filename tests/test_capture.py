@@ -26,6 +26,14 @@ def ideal_frame(probe, camera, rotation, exposure_scale):
     return TRUE_CURVE.encode(radiance * exposure_scale), radiance
 
 
+def known_probe(probe, camera):
+    """An accumulator holding a known probe (every disk texel measured once)."""
+    acc = ProbeAccumulator(probe.shape[0], camera, np.ones((camera.height, camera.width)))
+    inside = anglemap_disk_mask(probe.shape[0])[..., None]
+    acc.sums[:], acc.weights[:] = probe * inside, np.broadcast_to(inside, acc.weights.shape)
+    return acc
+
+
 def ideal_response():
     return RecoveredResponse(np.repeat(TRUE_CURVE.decode(np.arange(256))[:, None], 3, axis=1))
 
@@ -86,7 +94,7 @@ def test_alignment_finds_a_known_rotation(detailed_probe, offset_deg):
     frame = TRUE_CURVE.encode(radiance * scale)
     predicted = truth * Rotation.from_euler("xyz", offset_deg, degrees=True)
     aligner = Aligner(camera, np.ones((480, 640)), ideal_response())
-    found = aligner.align(frame, detailed_probe, np.ones((512, 512), bool), predicted.as_matrix(), scale)
+    found = aligner.align(frame, known_probe(detailed_probe, camera), predicted.as_matrix(), scale)
     assert found.rotation is not None and found.inliers >= 20
     error = np.degrees(((predicted * found.rotation).inv() * truth).magnitude())
     assert error < 0.1
@@ -97,7 +105,7 @@ def test_a_featureless_frame_changes_nothing():
     probe = np.full((128, 128, 3), 0.5, np.float32) * anglemap_disk_mask(128)[..., None]
     frame = np.full((480, 640, 3), 128, np.uint8)
     aligner = Aligner(camera, np.ones((480, 640)), ideal_response())
-    found = aligner.align(frame, probe, anglemap_disk_mask(128), Rotation.identity().as_matrix(), 1.0)
+    found = aligner.align(frame, known_probe(probe, camera), Rotation.identity().as_matrix(), 1.0)
     assert found.rotation is None
 
 

@@ -131,7 +131,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
             metered, index = divmod(k, len(bracket))
             # Only metered frames are aligned: the bracketed ones are dark but for the highlights.
             if settings.align_every and index == 0 and metered % settings.align_every == 0 and k > 0:
-                found = aligner.align(codes, accumulator.probe(), accumulator.covered(), predicted.as_matrix(), exposure_scale)
+                found = aligner.align(codes, accumulator, predicted.as_matrix(), exposure_scale)
                 # A match that would turn the view by more than the IMU can have drifted since the last
                 # one is a false match (few features, repeated patterns): it is dropped like a failed one.
                 plausible = np.radians(GATE_DEG + GATE_DEG_PER_S * (times[k] - last_aligned_t))

@@ -26,16 +26,6 @@ class RecoveredResponse:
         """Relative exposure (..., 3) float32 of 8-bit RGB codes (..., 3)."""
         return self.linear[codes, np.arange(3)].astype(np.float32)
 
-    def encode(self, x: np.ndarray) -> np.ndarray:
-        """8-bit codes (..., 3) of relative exposures (..., 3): the nearest code on the recovered curve
-        (the inverse of linearise, for rendering what the camera would see)."""
-        x = np.asarray(x, dtype=np.float64)
-        out = np.empty(x.shape, dtype=np.uint8)
-        for c in range(3):
-            mids = 0.5 * (self.linear[1:, c] + self.linear[:-1, c])
-            out[..., c] = np.searchsorted(mids, x[..., c])
-        return out
-
 
 def _fill_and_scale(curve: np.ndarray) -> np.ndarray:
     """One channel of Robertson's output: codes it never saw filled by interpolation in log, made
