@@ -22,13 +22,9 @@ class RecoveredResponse:
 
     linear: np.ndarray  # (256, 3) float64, non-decreasing
 
-    def linearise(self, codes: np.ndarray) -> np.ndarray:
-        """Relative exposure (..., 3) float32 of 8-bit RGB codes (..., 3)."""
-        return self.linear[codes, np.arange(3)].astype(np.float32)
-
 
 def _fill_and_scale(curve: np.ndarray) -> np.ndarray:
-    """One channel of Robertson's output: codes it never saw filled by interpolation in log, made
+    """Robertson's curve (the channels' geometric mean): codes it never saw filled by interpolation in log, made
     non-decreasing, and scaled so that the curve extrapolated to code 255 is 1 (a quadratic in the code
     fitted to the log over SCALE_FIT_CODES: Robertson's own value at 255 mixes every clipped level)."""
     codes = np.arange(256)
