@@ -151,15 +151,15 @@ def cmd_capture(args: argparse.Namespace) -> int:
     source = args.source
     if source is not None and source.is_dir():
         rec = load_recording(source)
+        out = _output_dir(args.output)
     else:
         scenario = load_scenario(source)
         scenario = dataclasses.replace(scenario, ar=dataclasses.replace(scenario.ar, enabled=False))  # the sweep only
         recording_segments(scenario)
-        folder = _output_dir(args.output) / "recording"
+        out = _output_dir(args.output)
         with progress_bar("recording the capture sweep", 1.0) as update:
-            record(scenario, folder, progress=lambda f: update(completed=f))
-        rec = load_recording(folder)
-    out = _output_dir(args.output)
+            record(scenario, out / "recording", progress=lambda f: update(completed=f))
+        rec = load_recording(out / "recording")
     scenario = recording_scenario(rec)
     settings = CaptureSettings.of(scenario, args.size, args.align_every)
     with progress_bar("capturing", 1.0) as update:

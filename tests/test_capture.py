@@ -16,6 +16,7 @@ from arsim.sensors.trajectory import CaptureSweep
 from arsim.sensors.views import environment_view_reference
 from tests.conftest import ENVMAPS
 from tests.test_cli import arsim, assert_one_line_error
+from tests.test_recording import SHORT
 
 TRUE_CURVE = ResponseCurve()
 
@@ -120,24 +121,10 @@ def test_robertson_recovers_the_response_from_a_burst(detailed_probe):
     assert error["median_pct"] < 3 and error["max_pct"] < 10
 
 
-SHORT = """
-[environment]
-map = "envmaps/courtyard.exr"
-probe_size = 128
-[capture]
-duration_s = 2.0
-[device.camera]
-width = 96
-height = 72
-[ar]
-enabled = false
-"""
-
-
 @pytest.fixture(scope="module")
 def short_recording(tmp_path_factory):
     root = tmp_path_factory.mktemp("capture")
-    (root / "short.toml").write_text(SHORT)
+    (root / "short.toml").write_text(SHORT.format(seed=0))  # the recording tests' short sweep (and AR path)
     r = arsim("record", root / "short.toml", "-o", root / "rec")
     assert r.returncode == 0, r.stderr
     return root / "rec"
@@ -157,36 +144,30 @@ def test_capture_of_a_short_recording_writes_every_output(short_recording, tmp_p
     assert 0 < metrics["coverage_pct"] <= 100
 
 
-def _copy(recording, tmp_path):
-    import shutil
-
-    return shutil.copytree(recording, tmp_path / "rec")
-
-
-def test_a_recording_without_frames_is_refused(short_recording, tmp_path):
-    rec = _copy(short_recording, tmp_path)
+def _no_frames(rec):
     for png in (rec / "frames").glob("*.png"):
         png.unlink()
     (rec / "frames.csv").write_text("t_ns,exposure_ns,iso,file\n")
-    r = arsim("capture", rec, "-o", tmp_path / "out")
-    assert_one_line_error(r, "no frames")
-    assert not (tmp_path / "out" / "env.exr").exists()
 
 
-def test_a_recording_without_a_burst_is_refused(short_recording, tmp_path):
-    rec = _copy(short_recording, tmp_path)
+def _no_burst(rec):
     (rec / "burst.csv").write_text("exposure_ns,iso,file\n")
-    r = arsim("capture", rec, "-o", tmp_path / "out")
-    assert_one_line_error(r, "no response burst")
-    assert not (tmp_path / "out" / "env.exr").exists()
 
 
-def test_saturated_frames_are_refused(short_recording, tmp_path):
+def _saturated(rec):
     import cv2
 
-    rec = _copy(short_recording, tmp_path)
     for png in (rec / "frames").glob("*.png"):
         cv2.imwrite(str(png), np.full((72, 96, 3), 255, np.uint8))
+
+
+@pytest.mark.parametrize("damage, message", [(_no_frames, "no frames"), (_no_burst, "no response burst"),
+                                             (_saturated, "saturated")])
+def test_unusable_recordings_are_refused(short_recording, tmp_path, damage, message):
+    import shutil
+
+    rec = shutil.copytree(short_recording, tmp_path / "rec")
+    damage(rec)
     r = arsim("capture", rec, "-o", tmp_path / "out")
-    assert_one_line_error(r, "saturated")
+    assert_one_line_error(r, message)
     assert not (tmp_path / "out" / "env.exr").exists()

@@ -146,5 +146,5 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
                 progress((k + 1) / len(rec.frames), accumulator.coverage())
     if not any_unclipped:
         raise ArsimError(f"{rec.folder}: every frame is saturated (all codes 255); nothing can be captured from it")
-    return CaptureResult(accumulator, response, np.array([f["t_ns"] for f in rec.frames]) / 1e9, truth, uncorrected,
+    return CaptureResult(accumulator, response, times, truth, uncorrected,
                          Rotation.concatenate(corrected), aligned, time.perf_counter() - start)

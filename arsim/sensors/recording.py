@@ -75,7 +75,7 @@ def _write_png(path: Path, frame: np.ndarray) -> None:
         tmp.write_bytes(png_bytes(frame))
 
 
-BURST_METERING_FRAMES = 8  # unrecorded frames the burst's auto-exposure takes to settle at the start pose
+BURST_METERING_FRAMES = 8  # unrecorded frames the burst's auto-exposure takes to settle on its view
 
 
 def _write_burst(out_dir: Path, camera: CameraRenderer, view: Rotation, scenario: Scenario,
