@@ -6,12 +6,19 @@ at all) times a centre weight (the frame's vignetted edges and its rim count les
 trust, the square of its exposure (one code step is a radiance step inversely proportional to the
 exposure: the weight is the inverse of that quantisation variance). A frame bracketed 14 EV down for
 the highlights thus adds nothing measurable where a metered frame saw the scene well, and is all
-there is where every metered frame clipped. Samples are
-bilinear with the weights inside (sum of b w L / sum of b w over the four pixels); where any of the
-four pixels is clipped the frame adds nothing there (the texel may be as bright as the clipped pixel,
-and its unclipped neighbours would understate it: a lamp's core would take the value of its rim). A
-texel only ever seen clipped keeps the largest lower bound of its radiance (the full-scale value of
-the shortest exposure that saw it) and is flagged as clipped.
+there is where every metered frame clipped. Samples are bilinear with the weights inside (sum of
+b w L / sum of b w over the four pixels); where any of the four pixels is clipped the frame adds
+nothing there (the texel may be as bright as the clipped pixel, and its unclipped neighbours would
+understate it: a lamp's core would take the value of its rim) but a clipped vote.
+
+Frames are kept apart by exposure level (the bracket offsets), each level with its own sums and its
+votes (clipped or not, weighted by the bilinear and centre weights). A texel's radiance comes from
+the longest level whose frames mostly saw it unclipped, and the shorter ones: at a lamp's rim the
+few metered frames that a residual orientation error put just beside it would otherwise outweigh
+every short exposure that saw the lamp there (by the exposure squared, 2^28 at 14 EV), and the lamp
+would shrink to where every frame clipped (default sweep: 12 % of the brightest lamp's energy lost at
+0.2-0.3 degrees of error). A texel only ever seen clipped keeps the largest lower bound of its
+radiance (the full-scale value of the shortest exposure that saw it) and is flagged as clipped.
 
 `ProbeAccumulator.add` runs compiled (numba, both cores); `accumulate_reference` is the NumPy oracle
 of one frame's contribution.
@@ -25,9 +32,16 @@ import numpy as np
 from arsim.core.conventions import CameraIntrinsics, anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 
 
-def hat_weights() -> np.ndarray:
-    """Weight of each 8-bit code (256,): a triangle peaking at mid-grey, 0 at 0 and at 255."""
+def hat_weights(level: int = 0) -> np.ndarray:
+    """Weight of each 8-bit code (256,) in a frame of this exposure level: for the longest, a triangle
+    peaking at mid-grey, 0 at 0 and at 255; for the shorter ones, 1 but at 255. Those frames are there
+    for the highlights, and what a sample of theirs says is dominated by where it lands (a lamp a few
+    pixels wide, registered to a fraction of a degree), not by its noise: a dark sample beside a lamp
+    says "not the lamp here" as loudly as a bright one says "the lamp", or the lamp would grow by
+    every frame's registration error."""
     codes = np.arange(256, dtype=np.float64)
+    if level > 0:
+        return np.where(codes < 255, 1.0, 0.0)
     return np.minimum(codes, 255.0 - codes) / 127.5
 
 
@@ -51,11 +65,12 @@ def _project(d0, d1, d2, fx, fy, cx, cy, k1, k2):
 
 @numba.njit(cache=True, parallel=True, nogil=True)
 def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, codes, radiance_of_code, hat,
-                centre, trust, sums, weights, bound):
+                centre, trust, sums, weights, clipped_votes, unclipped_votes, bound):
     """For every disk texel (directions (K, 3), at rows, cols of the maps) inside the frame: add the
-    weighted bilinear sample of the frame to sums and weights, or raise bound where any of the four
-    pixels is clipped. radiance_of_code (256, 3): this frame's radiance per code before vignetting;
-    centre (H, W): the pixel weights, whose fall-off part is divided out of the radiance as well."""
+    weighted bilinear sample of the frame to sums and weights and its vote to unclipped_votes, or,
+    where any of the four pixels is clipped, its vote to clipped_votes and raise bound (all maps of
+    this frame's exposure level, (N, N, 3)). radiance_of_code (256, 3): this frame's radiance per code
+    before vignetting; centre (H, W, 2): the pixel weights and the fall-off divided out of the radiance."""
     fx, fy, cx, cy, k1, k2 = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3], intrinsics[4], intrinsics[5]
     height, width = codes.shape[0], codes.shape[1]
     m = world_to_camera
@@ -73,29 +88,68 @@ def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, co
         ax, ay = px - x0, py - y0
         r, c = rows[k], cols[k]
         for ch in range(3):
-            num, den, clipped = 0.0, 0.0, 0
+            num, den, vote, clipped = 0.0, 0.0, 0.0, 0
             for j in range(4):
                 x, y = x0 + (j & 1), y0 + (j >> 1)
                 b = (ax if j & 1 else 1.0 - ax) * (ay if j >> 1 else 1.0 - ay)
                 code = codes[y, x, ch]
-                w = b * hat[code] * centre[y, x, 0] * trust
+                v = b * centre[y, x, 0]
+                w = v * hat[code] * trust
                 num += w * radiance_of_code[code, ch] / centre[y, x, 1]
                 den += w
+                vote += v
                 clipped += code == 255
             if clipped == 0:
-                if den > 0.0:
-                    sums[r, c, ch] += num
-                    weights[r, c, ch] += den
+                sums[r, c, ch] += num
+                weights[r, c, ch] += den
+                unclipped_votes[r, c, ch] += vote
             else:  # a texel next to clipped pixels may be as bright: its unclipped neighbours would understate it
+                clipped_votes[r, c, ch] += vote
                 lower = radiance_of_code[255, ch] / centre[y0, x0, 1]
                 if lower > bound[r, c, ch]:
                     bound[r, c, ch] = lower
 
 
-class ProbeAccumulator:
-    """The N x N angle map being captured: running sums, weights and clipped lower bounds."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, r, c, ch):
+    """One texel's radiance from the per-level maps (levels, N, N, 3), longest exposure first: the
+    weighted mean over the longest level whose votes there are mostly unclipped and all shorter ones
+    (any level's samples where every level mostly clipped, but no less than the lower bound); the
+    lower bound where nothing was measured; -1 where nothing was seen at all."""
+    levels = sums.shape[0]
+    first = levels
+    for level in range(levels):
+        unclipped = unclipped_votes[level, r, c, ch]
+        if unclipped > 0.0 and unclipped >= clipped_votes[level, r, c, ch]:
+            first = level
+            break
+    num, den = 0.0, 0.0
+    for level in range(first, levels):
+        num += sums[level, r, c, ch]
+        den += weights[level, r, c, ch]
+    if den > 0.0:
+        return num / den
+    for level in range(levels):
+        num += sums[level, r, c, ch]
+        den += weights[level, r, c, ch]
+    if den > 0.0:
+        return max(num / den, bound[r, c, ch])
+    return bound[r, c, ch] if bound[r, c, ch] > 0.0 else -1.0
 
-    def __init__(self, size: int, camera: CameraIntrinsics, falloff: np.ndarray):
+
+@numba.njit(cache=True, parallel=True, nogil=True)
+def _merge(sums, weights, clipped_votes, unclipped_votes, bound, out):
+    for r in numba.prange(out.shape[0]):
+        for c in range(out.shape[1]):
+            for ch in range(3):
+                out[r, c, ch] = max(merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, r, c, ch), 0.0)
+
+
+class ProbeAccumulator:
+    """The N x N angle map being captured: per exposure level, running sums, weights and votes; the
+    clipped lower bounds."""
+
+    def __init__(self, size: int, camera: CameraIntrinsics, falloff: np.ndarray, levels: int = 1):
         self.size, self.camera = size, camera
         inside = anglemap_disk_mask(size)
         self.rows, self.cols = (a.astype(np.int32) for a in np.nonzero(inside))
@@ -106,31 +160,39 @@ class ProbeAccumulator:
         corners = camera.unproject(np.array([[0, 0], [camera.width - 1, 0], [0, camera.height - 1],
                                              [camera.width - 1, camera.height - 1]], dtype=np.float64))
         self.min_cos = float(corners[:, 2].min()) - 1e-3  # a little wider than the frame's corners
-        self.hat = hat_weights()
-        self.sums = np.zeros((size, size, 3))
-        self.weights = np.zeros((size, size, 3))
+        self.hats = [hat_weights(level) for level in range(levels)]
+        self.sums, self.weights, self.clipped_votes, self.unclipped_votes = (
+            np.zeros((levels, size, size, 3)) for _ in range(4))
         self.bound = np.zeros((size, size, 3))
 
-    def add(self, codes: np.ndarray, radiance_of_code: np.ndarray, camera_to_world: np.ndarray, trust: float = 1.0) -> None:
+    @property
+    def levels(self) -> tuple[np.ndarray, ...]:
+        """What merged_radiance reads: sums, weights, clipped and unclipped votes, bound."""
+        return self.sums, self.weights, self.clipped_votes, self.unclipped_votes, self.bound
+
+    def add(self, codes: np.ndarray, radiance_of_code: np.ndarray, camera_to_world: np.ndarray, trust: float = 1.0,
+            level: int = 0) -> None:
         """Accumulate one frame: 8-bit codes (H, W, 3), its radiance per code before vignetting (256, 3),
-        the camera-to-world rotation matrix it was taken with, and its trust (exposure squared)."""
+        the camera-to-world rotation matrix it was taken with, its trust (exposure squared) and its
+        exposure level (0: the longest)."""
         _accumulate(self.directions, self.rows, self.cols, np.ascontiguousarray(np.asarray(camera_to_world).T),
                     self.intrinsics, self.min_cos, codes, np.ascontiguousarray(radiance_of_code, dtype=np.float64),
-                    self.hat, self.centre, float(trust), self.sums, self.weights, self.bound)
+                    self.hats[level], self.centre, float(trust), self.sums[level], self.weights[level],
+                    self.clipped_votes[level], self.unclipped_votes[level], self.bound)
 
     def probe(self) -> np.ndarray:
-        """The captured angle map (N, N, 3) float32: sum(w L) / sum(w); the lower bound where a texel was
-        only seen clipped; 0 where never seen."""
-        radiance = np.divide(self.sums, self.weights, out=np.zeros_like(self.sums), where=self.weights > 0)
-        return np.where(self.weights > 0, radiance, self.bound).astype(np.float32)
+        """The captured angle map (N, N, 3) float32 (see merged_radiance); 0 where never seen."""
+        out = np.zeros((self.size, self.size, 3))
+        _merge(*self.levels, out)
+        return out.astype(np.float32)
 
     def covered(self) -> np.ndarray:
         """(N, N) bool: texels with a value in every channel (measured, or a clipped lower bound)."""
-        return np.all((self.weights > 0) | (self.bound > 0), axis=-1)
+        return np.all((self.weights.sum(axis=0) > 0) | (self.bound > 0), axis=-1)
 
     def clipped_only(self) -> np.ndarray:
         """(N, N) bool: texels where some channel is only a lower bound (always seen clipped)."""
-        return np.any((self.weights == 0) & (self.bound > 0), axis=-1)
+        return np.any((self.weights.sum(axis=0) == 0) & (self.bound > 0), axis=-1)
 
     def coverage(self) -> float:
         """Fraction of the sphere's solid angle covered."""
@@ -140,12 +202,13 @@ class ProbeAccumulator:
 
 def accumulate_reference(size: int, camera: CameraIntrinsics, falloff: np.ndarray, codes: np.ndarray,
                          radiance_of_code: np.ndarray, camera_to_world: np.ndarray,
-                         trust: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """NumPy oracle of one frame added to an empty accumulator: (sums, weights), each (N, N, 3)."""
+                         trust: float = 1.0, level: int = 0) -> tuple[np.ndarray, ...]:
+    """NumPy oracle of one frame added to an empty accumulator's level: (sums, weights, clipped votes,
+    unclipped votes), each (N, N, 3)."""
     inside = anglemap_disk_mask(size)
     directions = anglemap_directions(size)[inside]
     local = directions @ np.asarray(camera_to_world)  # world to camera: R^T d
-    sums, weights = np.zeros((size, size, 3)), np.zeros((size, size, 3))
+    maps = np.zeros((4, size, size, 3))  # sums, weights, clipped and unclipped votes
     front = local[:, 2] > 1e-9
     px = np.full((len(local), 2), -1.0)
     px[front] = camera.project(local[front])
@@ -153,8 +216,9 @@ def accumulate_reference(size: int, camera: CameraIntrinsics, falloff: np.ndarra
     x0 = np.minimum(px[ok, 0].astype(int), camera.width - 2)
     y0 = np.minimum(px[ok, 1].astype(int), camera.height - 2)
     ax, ay = px[ok, 0] - x0, px[ok, 1] - y0
-    centre, hat = centre_weights(camera, falloff).astype(np.float64), hat_weights()
-    num, den, clipped = np.zeros((ok.sum(), 3)), np.zeros((ok.sum(), 3)), np.zeros((ok.sum(), 3), bool)
+    centre, hat = centre_weights(camera, falloff).astype(np.float64), hat_weights(level)
+    num, den, vote = np.zeros((ok.sum(), 3)), np.zeros((ok.sum(), 3)), np.zeros((ok.sum(), 1))
+    clipped = np.zeros((ok.sum(), 3), bool)
     for dy in (0, 1):
         for dx in (0, 1):
             b = (ax if dx else 1 - ax) * (ay if dy else 1 - ay)
@@ -163,9 +227,10 @@ def accumulate_reference(size: int, camera: CameraIntrinsics, falloff: np.ndarra
             w = b[:, None] * hat[c] * centre[y, x][:, None] * trust
             num += w * radiance_of_code[c, np.arange(3)] / falloff[y, x][:, None]
             den += w
+            vote += (b * centre[y, x])[:, None]
             clipped |= c == 255
-    num[clipped], den[clipped] = 0.0, 0.0  # next to a clipped pixel a frame says nothing
+    num[clipped], den[clipped] = 0.0, 0.0  # next to a clipped pixel a frame says nothing but its vote
     target = np.flatnonzero(inside.ravel())[ok]
-    sums.reshape(-1, 3)[target] = num
-    weights.reshape(-1, 3)[target] = den
-    return sums, weights
+    for k, values in enumerate([num, den, np.where(clipped, vote, 0.0), np.where(clipped, 0.0, vote)]):
+        maps[k].reshape(-1, 3)[target] = values
+    return tuple(maps)

@@ -13,7 +13,7 @@ import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from arsim.capture.accumulate import ProbeAccumulator
+from arsim.capture.accumulate import ProbeAccumulator, merged_radiance
 from arsim.capture.response import RecoveredResponse
 from arsim.core.conventions import CameraIntrinsics
 
@@ -32,12 +32,13 @@ def scaled_camera(camera: CameraIntrinsics, scale: float = SCALE) -> CameraIntri
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
-def _render(rays, camera_to_world, sums, weights, bound, exposure_scale, falloff, mids, out, mask):
+def _render(rays, camera_to_world, sums, weights, clipped_votes, unclipped_votes, bound, exposure_scale, falloff, mids,
+            out, mask):
     """Per pixel of rays (H, W, 3) (unit, camera axes): the 8-bit code (out) the camera would record for
     the probe's bilinear radiance along the world ray, times exposure_scale and the fall-off; the probe
-    is read straight from the accumulator's sums, weights and lower bounds (no whole-map division per
-    alignment). mask: 255 where all four texels are covered. mids (255, 3): the code boundaries."""
-    n = sums.shape[0]
+    is read straight from the accumulator's per-level maps (no whole-map merge per alignment). mask: 255
+    where all four texels are covered. mids (255, 3): the code boundaries."""
+    n = bound.shape[0]
     m = camera_to_world
     for y in numba.prange(rays.shape[0]):
         for x in range(rays.shape[1]):
@@ -61,10 +62,9 @@ def _render(rays, camera_to_world, sums, weights, bound, exposure_scale, falloff
                 for j in range(4):
                     row, col = q0 + (j >> 1), c0 + (j & 1)
                     w = (ac if j & 1 else 1.0 - ac) * (ar if j >> 1 else 1.0 - ar)
-                    if weights[row, col, ch] > 0.0:
-                        v += w * sums[row, col, ch] / weights[row, col, ch]
-                    elif bound[row, col, ch] > 0.0:
-                        v += w * bound[row, col, ch]
+                    radiance = merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, row, col, ch)
+                    if radiance >= 0.0:
+                        v += w * radiance
                     else:
                         ok = False
                 exposure = v * exposure_scale * falloff[y, x]
@@ -149,8 +149,8 @@ class Aligner:
         where the probe covers it."""
         h, w = self.camera.height, self.camera.width
         view, mask = np.empty((h, w, 3), np.uint8), np.empty((h, w), np.uint8)
-        _render(self.rays, np.ascontiguousarray(camera_to_world, dtype=np.float64), probe.sums, probe.weights,
-                probe.bound, exposure_scale, self.falloff, self.mids, view, mask)
+        _render(self.rays, np.ascontiguousarray(camera_to_world, dtype=np.float64), *probe.levels, exposure_scale,
+                self.falloff, self.mids, view, mask)
         return view, mask
 
     def align(self, frame: np.ndarray, probe: ProbeAccumulator, camera_to_world: np.ndarray,

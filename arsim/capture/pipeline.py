@@ -114,7 +114,8 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     camera = recording_camera(rec)
     falloff = vignette(camera.height, camera.width, sensor.vignetting)
     response = burst_response(rec, sensor)
-    accumulator = ProbeAccumulator(settings.size, camera, falloff)
+    exposure_levels = sorted(set(bracket), reverse=True)  # the accumulator's levels, longest exposure first
+    accumulator = ProbeAccumulator(settings.size, camera, falloff, levels=len(exposure_levels))
     aligner = Aligner(camera, falloff, response, scenario.run.seed)
     uncorrected, truth = fused_camera_orientations(rec), frame_camera_orientations(rec)
     correction = DriftCorrection(settings.correction_gain)  # corrected = correction * uncorrected
@@ -141,7 +142,8 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
                     aligned[k] = True
                     predicted = correction.rotation * uncorrected[k]
             corrected.append(predicted)
-            accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale**2)
+            accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale**2,
+                            exposure_levels.index(bracket[index]))
             if k % 30 == 0 or k == len(rec.frames) - 1:
                 progress((k + 1) / len(rec.frames), accumulator.coverage())
     if not any_unclipped:

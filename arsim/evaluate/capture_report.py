@@ -115,7 +115,7 @@ def plot_drift(result: CaptureResult, path: Path) -> Path:
 def plot_coverage_map(result: CaptureResult, path: Path) -> Path:
     plt = _pyplot()
     acc = result.accumulator
-    weight = acc.weights.mean(axis=-1)
+    weight = acc.weights.sum(axis=0).mean(axis=-1)
     fig, ax = plt.subplots(figsize=(5.5, 5))
     seen = weight > 0
     relative = np.where(seen, weight / (weight[seen].max() if seen.any() else 1.0), np.nan)
