@@ -34,6 +34,7 @@ def known_probe(probe, camera):
     inside = anglemap_disk_mask(probe.shape[0])[..., None]
     acc.sums[0], acc.weights[0] = probe * inside, np.broadcast_to(inside, probe.shape)
     acc.unclipped_votes[0] = acc.weights[0]
+    acc.radiance[:] = np.where(inside, probe, -1.0)
     return acc
 
 

@@ -63,14 +63,42 @@ def _project(d0, d1, d2, fx, fy, cx, cy, k1, k2):
     return fx * x * radial + cx, fy * y * radial + cy
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, r, c, ch):
+    """One texel's radiance from the per-level maps (levels, N, N, 3), longest exposure first: the
+    weighted mean over the longest level whose votes there are mostly unclipped and all shorter ones
+    (any level's samples where every level mostly clipped, but no less than the lower bound); the
+    lower bound where nothing was measured; -1 where nothing was seen at all."""
+    levels = sums.shape[0]
+    first = levels
+    for level in range(levels):
+        unclipped = unclipped_votes[level, r, c, ch]
+        if unclipped > 0.0 and unclipped >= clipped_votes[level, r, c, ch]:
+            first = level
+            break
+    num, den = 0.0, 0.0
+    for level in range(first, levels):
+        num += sums[level, r, c, ch]
+        den += weights[level, r, c, ch]
+    if den > 0.0:
+        return num / den
+    for level in range(levels):
+        num += sums[level, r, c, ch]
+        den += weights[level, r, c, ch]
+    if den > 0.0:
+        return max(num / den, bound[r, c, ch])
+    return bound[r, c, ch] if bound[r, c, ch] > 0.0 else -1.0
+
+
 @numba.njit(cache=True, parallel=True, nogil=True)
 def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, codes, radiance_of_code, hat,
-                centre, trust, sums, weights, clipped_votes, unclipped_votes, bound):
+                centre, trust, sums, weights, clipped_votes, unclipped_votes, level, bound, radiance):
     """For every disk texel (directions (K, 3), at rows, cols of the maps) inside the frame: add the
-    weighted bilinear sample of the frame to sums and weights and its vote to unclipped_votes, or,
-    where any of the four pixels is clipped, its vote to clipped_votes and raise bound (all maps of
-    this frame's exposure level, (N, N, 3)). radiance_of_code (256, 3): this frame's radiance per code
-    before vignetting; centre (H, W, 2): the pixel weights and the fall-off divided out of the radiance."""
+    weighted bilinear sample of the frame to its level's sums and weights and its vote to
+    unclipped_votes, or, where any of the four pixels is clipped, its vote to clipped_votes and raise
+    bound; then merge the texel's radiance anew. radiance_of_code (256, 3): this frame's radiance per
+    code before vignetting; centre (H, W, 2): the pixel weights and the fall-off divided out of the
+    radiance."""
     fx, fy, cx, cy, k1, k2 = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3], intrinsics[4], intrinsics[5]
     height, width = codes.shape[0], codes.shape[1]
     m = world_to_camera
@@ -100,49 +128,15 @@ def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, co
                 vote += v
                 clipped += code == 255
             if clipped == 0:
-                sums[r, c, ch] += num
-                weights[r, c, ch] += den
-                unclipped_votes[r, c, ch] += vote
+                sums[level, r, c, ch] += num
+                weights[level, r, c, ch] += den
+                unclipped_votes[level, r, c, ch] += vote
             else:  # a texel next to clipped pixels may be as bright: its unclipped neighbours would understate it
-                clipped_votes[r, c, ch] += vote
+                clipped_votes[level, r, c, ch] += vote
                 lower = radiance_of_code[255, ch] / centre[y0, x0, 1]
                 if lower > bound[r, c, ch]:
                     bound[r, c, ch] = lower
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, r, c, ch):
-    """One texel's radiance from the per-level maps (levels, N, N, 3), longest exposure first: the
-    weighted mean over the longest level whose votes there are mostly unclipped and all shorter ones
-    (any level's samples where every level mostly clipped, but no less than the lower bound); the
-    lower bound where nothing was measured; -1 where nothing was seen at all."""
-    levels = sums.shape[0]
-    first = levels
-    for level in range(levels):
-        unclipped = unclipped_votes[level, r, c, ch]
-        if unclipped > 0.0 and unclipped >= clipped_votes[level, r, c, ch]:
-            first = level
-            break
-    num, den = 0.0, 0.0
-    for level in range(first, levels):
-        num += sums[level, r, c, ch]
-        den += weights[level, r, c, ch]
-    if den > 0.0:
-        return num / den
-    for level in range(levels):
-        num += sums[level, r, c, ch]
-        den += weights[level, r, c, ch]
-    if den > 0.0:
-        return max(num / den, bound[r, c, ch])
-    return bound[r, c, ch] if bound[r, c, ch] > 0.0 else -1.0
-
-
-@numba.njit(cache=True, parallel=True, nogil=True)
-def _merge(sums, weights, clipped_votes, unclipped_votes, bound, out):
-    for r in numba.prange(out.shape[0]):
-        for c in range(out.shape[1]):
-            for ch in range(3):
-                out[r, c, ch] = max(merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, r, c, ch), 0.0)
+            radiance[r, c, ch] = merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, r, c, ch)
 
 
 class ProbeAccumulator:
@@ -164,11 +158,12 @@ class ProbeAccumulator:
         self.sums, self.weights, self.clipped_votes, self.unclipped_votes = (
             np.zeros((levels, size, size, 3)) for _ in range(4))
         self.bound = np.zeros((size, size, 3))
+        self.radiance = np.full((size, size, 3), -1.0)  # merged after every frame where it saw; -1: unseen
 
     @property
     def levels(self) -> tuple[np.ndarray, ...]:
-        """What merged_radiance reads: sums, weights, clipped and unclipped votes, bound."""
-        return self.sums, self.weights, self.clipped_votes, self.unclipped_votes, self.bound
+        """Per exposure level (levels, N, N, 3): sums, weights, clipped and unclipped votes."""
+        return self.sums, self.weights, self.clipped_votes, self.unclipped_votes
 
     def add(self, codes: np.ndarray, radiance_of_code: np.ndarray, camera_to_world: np.ndarray, trust: float = 1.0,
             level: int = 0) -> None:
@@ -177,14 +172,11 @@ class ProbeAccumulator:
         exposure level (0: the longest)."""
         _accumulate(self.directions, self.rows, self.cols, np.ascontiguousarray(np.asarray(camera_to_world).T),
                     self.intrinsics, self.min_cos, codes, np.ascontiguousarray(radiance_of_code, dtype=np.float64),
-                    self.hats[level], self.centre, float(trust), self.sums[level], self.weights[level],
-                    self.clipped_votes[level], self.unclipped_votes[level], self.bound)
+                    self.hats[level], self.centre, float(trust), *self.levels, level, self.bound, self.radiance)
 
     def probe(self) -> np.ndarray:
         """The captured angle map (N, N, 3) float32 (see merged_radiance); 0 where never seen."""
-        out = np.zeros((self.size, self.size, 3))
-        _merge(*self.levels, out)
-        return out.astype(np.float32)
+        return np.maximum(self.radiance, 0.0).astype(np.float32)
 
     def covered(self) -> np.ndarray:
         """(N, N) bool: texels with a value in every channel (measured, or a clipped lower bound)."""
