@@ -24,7 +24,9 @@ from arsim.sensors.camera import SensorSettings, vignette
 from arsim.sensors.recording import Recording
 
 
-GATE_DEG, GATE_DEG_PER_S = 0.5, 0.5  # largest plausible correction: this much, plus this much per second unaligned
+# The largest plausible correction: this much, plus this much per second unaligned (a gyroscope biased by
+# 0.5 degrees/s drifts that fast, and a tighter rate dropped its true corrections on the interior's ceiling).
+GATE_DEG, GATE_DEG_PER_S = 0.5, 1.0
 
 
 @dataclass(frozen=True)

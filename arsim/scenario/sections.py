@@ -125,9 +125,10 @@ class CaptureSection:
     sway_m: float = setting(0.03, min=0.0, max=1.0, unit="m", help="hand sway")
     fusion: str = setting("game-rotation-vector", choices=("game-rotation-vector", "rotation-vector"),
                           help="orientation the app reads")
-    burst_frames: int = setting(7, min=0, max=64, unit="frames",
+    burst_frames: int = setting(13, min=0, max=64, unit="frames",
                                 help="bracketed burst at the start pose for response calibration (0: none)")
-    burst_step: float = setting(2.0, min=1.01, max=16.0, help="exposure ratio between burst frames")
+    burst_step: float = setting(1.41421356, min=1.01, max=16.0,
+                                help="exposure ratio between burst frames (half stops: Robertson sees every code from several exposures)")
     bracket_ev: tuple[float, ...] = setting((0.0, -7.0, -14.0), min=-30.0, max=30.0, unit="EV",
                                             help="exposure offsets the sweep's frames cycle through, the first 0 "
                                                  "(metered; the others capture highlights)")
