@@ -85,31 +85,61 @@ def test_perfect_sensor_and_ideal_camera_reproduce_the_truth():
     assert rel.mean() < 0.01 and np.median(rel) < 0.005
 
 
-def lamp_capture(levels: int) -> tuple[float, float]:
-    """A dim room with one small lamp 2000x brighter, swept with frames alternating a metered exposure
-    (the lamp clipped) and one 14 EV shorter (the lamp measured), each taken with a random orientation
-    error of 0.5 degrees RMS per axis: (captured over true energy of the lamp and the 3 texels around
-    it, median relative error of the room), with the frames kept apart by exposure (levels=2) or not."""
-    n = 128
-    d = anglemap_directions(n)
-    lamp_axis = np.array([0.0, 0.0, 1.0])
-    lamp = np.degrees(np.arccos(np.clip(d @ lamp_axis, -1, 1))) < 3.0
+LAMP_N = 128
+
+
+def lamp_scene() -> tuple[np.ndarray, np.ndarray]:
+    """A dim room with one small lamp 2000x brighter: (probe, lamp mask)."""
+    d = anglemap_directions(LAMP_N)
+    lamp = np.degrees(np.arccos(np.clip(d @ [0.0, 0.0, 1.0], -1, 1))) < 3.0
     room = 0.5 + 0.2 * d[..., 0] ** 2
-    probe = (np.where(lamp, 2000.0, room)[..., None] * [1.0, 0.9, 0.8] * anglemap_disk_mask(n)[..., None]).astype(np.float32)
+    probe = np.where(lamp, 2000.0, room)[..., None] * [1.0, 0.9, 0.8] * anglemap_disk_mask(LAMP_N)[..., None]
+    return probe.astype(np.float32), lamp
+
+
+def swept_lamp(levels: int, bracket_ev: tuple[float, ...] = (0.0, -14.0), error_deg: float = 0.5) -> ProbeAccumulator:
+    """The lamp scene swept with frames cycling through the bracket (0: a metered exposure, the lamp
+    clipped), each taken with a random orientation error of error_deg RMS per axis, accumulated with
+    the frames kept apart by exposure (levels = len(bracket_ev)) or not (levels=1)."""
+    probe, _ = lamp_scene()
     camera = CameraIntrinsics.from_fov(160, 120, 60.0)
-    acc = ProbeAccumulator(n, camera, np.ones((120, 160)), levels=levels)
+    acc = ProbeAccumulator(LAMP_N, camera, np.ones((120, 160)), levels=levels)
     rng = np.random.default_rng(3)
     for k, yaw in enumerate(np.linspace(-25, 25, 80)):
         truth = Rotation.from_euler("yx", [yaw, 10 * np.sin(k)], degrees=True)
-        taken = truth * Rotation.from_rotvec(rng.normal(0, np.radians(0.5), 3))
-        scale = 0.18 / 0.5 * 2.0 ** (-14 * (k % 2))
+        taken = truth * Rotation.from_rotvec(rng.normal(0, np.radians(error_deg), 3))
+        index = k % len(bracket_ev)
+        scale = 0.18 / 0.5 * 2.0 ** bracket_ev[index]
         frame = TRUE_CURVE.encode(environment_view_reference(probe, camera, truth) * scale)
-        acc.add(frame, ideal_response().linear / scale, taken.as_matrix(), scale**2, (k % 2) * (levels - 1))
+        acc.add(frame, ideal_response().linear / scale, taken.as_matrix(), scale**2, min(index, levels - 1))
+    return acc
+
+
+def lamp_capture(levels: int) -> tuple[float, float]:
+    """(captured over true energy of the lamp and the 3 texels around it, median relative error of
+    the room) for the swept lamp."""
+    probe, lamp = lamp_scene()
+    acc = swept_lamp(levels)
     near = cv2.dilate(lamp.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
     captured, luminance = acc.probe(), np.array([0.3, 0.6, 0.1])
-    room_texels = acc.covered() & ~near & anglemap_disk_mask(n)
+    room_texels = acc.covered() & ~near & anglemap_disk_mask(LAMP_N)
     return (float((captured[near] @ luminance).sum() / (probe[near] @ luminance).sum()),
             float(np.median(np.abs(captured[room_texels] - probe[room_texels]) / probe[room_texels])))
+
+
+def test_a_source_clipped_at_every_exposure_is_reported():
+    """Without short exposures the lamp is clipped in every frame: the capture keeps a lower bound,
+    says how much of the source that is, and warns that the exposure range cannot hold it."""
+    from arsim.capture.pipeline import CaptureResult
+    from arsim.evaluate.capture_report import brightest_warning, capture_metrics
+
+    probe, _ = lamp_scene()
+    acc = swept_lamp(levels=1, bracket_ev=(0.0,), error_deg=0.0)
+    still = Rotation.identity(80)
+    result = CaptureResult(acc, ideal_response(), np.arange(80) / 30, still, still, still, np.zeros(80, bool), 1.0)
+    metrics, _ = capture_metrics(result, probe, {"median_pct": 0.0, "max_pct": 0.0})
+    assert metrics["brightest_source_clipped_pct"] > 10 and metrics["brightest_source_ratio"] < 0.1
+    assert "lower bound" in brightest_warning(metrics)
 
 
 def test_frames_kept_apart_by_exposure_keep_a_misregistered_lamp_whole():
