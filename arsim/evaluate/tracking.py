@@ -1,0 +1,70 @@
+"""The tracker measured against the truth on an AR recording: per frame, the error of the camera's
+rotation (degrees) and position (millimetres, and percent of its distance to the tag), whether the tag
+was fully in view, and whether it was found."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from arsim.capture.pipeline import read_frame
+from arsim.evaluate.recording_plots import frame_camera_orientations, frame_positions, recording_camera, tag_in_view
+from arsim.sensors.recording import Recording
+from arsim.tracking.apriltag import TagPose, TagTracker
+
+
+@dataclass
+class TrackingRun:
+    poses: list[TagPose]
+    visible: np.ndarray  # (K,) bool: all four corners of the tag inside the frame (true pose)
+    rot_err_deg: np.ndarray  # (K,) inf where the tag was not found
+    trans_err_mm: np.ndarray  # (K,) camera position error, inf where not found
+    trans_err_pct: np.ndarray  # (K,) the same in percent of the camera's true distance to the tag
+
+    @property
+    def found(self) -> np.ndarray:
+        return np.array([p.found for p in self.poses])
+
+    def metrics(self) -> dict:
+        """Summary: the 95th percentiles over the frames where the tag was fully visible (a visible
+        tag not found counts as an infinite error), frame counts and the detection rate."""
+        visible, found = self.visible, self.found
+        p95 = (lambda a: float(np.percentile(a[visible], 95)) if visible.any() else float("nan"))
+        return {
+            "tracking_rot_err_deg_p95": p95(self.rot_err_deg),
+            "tracking_trans_err_pct_p95": p95(self.trans_err_pct),
+            "tracking_trans_err_mm_p95": p95(self.trans_err_mm),
+            "frames_total": int(len(found)),
+            "frames_lost": int((~found).sum()),
+            "frames_tag_visible": int(visible.sum()),
+            "detection_rate_visible": float(found[visible].mean()) if visible.any() else float("nan"),
+            "found_while_not_visible": int((found & ~visible).sum()),
+        }
+
+
+def track_recording(rec: Recording, linear_of_code: np.ndarray | None = None,
+                    progress: Callable[[float], None] = lambda fraction: None) -> TrackingRun:
+    """Track the tag through an AR recording's frames and measure every pose against the truth;
+    linear_of_code: the camera's inverse response (256,), e.g. the capture's, to linearise the frames."""
+    table = rec.meta["table"]
+    tracker = TagTracker(recording_camera(rec), table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+    views, positions = frame_camera_orientations(rec), frame_positions(rec)
+    poses, rot, mm, pct = [], [], [], []
+    for k, frame in enumerate(rec.frames):
+        pose = tracker.track(read_frame(rec.folder / frame["file"]))
+        poses.append(pose)
+        if pose.found:
+            true_world_to_camera = views[k].inv().as_matrix()
+            cos = (np.trace(pose.rotation @ true_world_to_camera.T) - 1) / 2
+            rot.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+            error = np.linalg.norm(pose.camera_position - positions[k])
+            mm.append(1000 * error)
+            pct.append(100 * error / np.linalg.norm(positions[k]))
+        else:
+            rot.append(np.inf), mm.append(np.inf), pct.append(np.inf)
+        if k % 20 == 0:
+            progress((k + 1) / len(rec.frames))
+    progress(1.0)
+    return TrackingRun(poses, tag_in_view(rec), np.array(rot), np.array(mm), np.array(pct))

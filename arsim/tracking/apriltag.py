@@ -1,0 +1,92 @@
+"""AprilTag (tag36h11) detection with OpenCV's ArucoDetector and sub-pixel corners, and the camera pose
+from the four corners with solvePnP's IPPE_SQUARE, the solver made for a square of known size.
+
+Frames are linearised with the camera's inverse response first (when it is known: the capture
+recovers it): the response brightens the blurred edge of the black square, which then looks smaller,
+and the tag farther away. On the default AR path the 95th percentile of the position error is 2.0 %
+of the distance on the 8-bit codes and 0.5 % linearised; AprilTag's own corner refinement (edges
+fitted along the whole side) beats cornerSubPix's there (1.3 %).
+
+The tag lies on the table (DESIGN.md section 3): centred at the world origin, its x axis along world +x,
+its image top towards world -z, its normal +y. IPPE_SQUARE wants the corners in the marker's own frame
+(x right, y up the tag image, z out of it), which is the world turned by MARKER_TO_WORLD.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from arsim.core.conventions import CameraIntrinsics
+from arsim.sensors.table import TAG_DICTIONARIES
+# Columns: the marker's x, y (up the tag image) and z (its normal) in world axes.
+MARKER_TO_WORLD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class TagPose:
+    """What the tracker saw in one frame: the world-to-camera transform (OpenCV camera axes), or
+    nothing when the tag was not found (the frame is lost and no virtual object is drawn)."""
+
+    rotation: np.ndarray | None  # (3, 3) world to camera
+    translation: np.ndarray | None  # (3,) world origin (the tag's centre) in camera coordinates, metres
+    corners: np.ndarray | None  # (4, 2) sub-pixel image corners in OpenCV's order
+
+    @property
+    def found(self) -> bool:
+        return self.rotation is not None
+
+    @property
+    def view_matrix(self) -> np.ndarray:
+        """4 x 4 world-to-camera matrix (OpenCV axes: x right, y down, z forward)."""
+        view = np.eye(4)
+        view[:3, :3], view[:3, 3] = self.rotation, self.translation
+        return view
+
+    @property
+    def camera_position(self) -> np.ndarray:
+        """The camera's centre in world coordinates."""
+        return -self.rotation.T @ self.translation
+
+
+LOST = TagPose(None, None, None)
+
+
+class TagTracker:
+    """Finds one tag (family, id, side of its black square) in 8-bit frames and returns its pose."""
+
+    def __init__(self, camera: CameraIntrinsics, tag_size_m: float, tag_id: int = 0, family: str = "tag36h11",
+                 linear_of_code: np.ndarray | None = None):
+        """linear_of_code (256,): the camera's inverse response (relative exposure of each 8-bit code),
+        used to linearise frames before detection; None: detect on the codes."""
+        if family not in TAG_DICTIONARIES:
+            raise ValueError(f"unknown tag family {family!r}; known: {', '.join(TAG_DICTIONARIES)}")
+        parameters = cv2.aruco.DetectorParameters()
+        parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_APRILTAG
+        self.linearise = None
+        if linear_of_code is not None:
+            linear = np.asarray(linear_of_code, dtype=np.float64)
+            self.linearise = np.clip(np.round(255 * linear / linear[-1]), 0, 255).astype(np.uint8)
+        self.detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(TAG_DICTIONARIES[family]), parameters)
+        self.camera, self.tag_id = camera, tag_id
+        h = tag_size_m / 2
+        # IPPE_SQUARE's order: top-left, top-right, bottom-right, bottom-left, in the marker frame.
+        self.marker_corners = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+    def track(self, frame: np.ndarray) -> TagPose:
+        """The tag's pose in an 8-bit RGB or grey frame, or LOST."""
+        grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
+        if self.linearise is not None:
+            grey = cv2.LUT(grey, self.linearise)
+        corners, ids, _ = self.detector.detectMarkers(grey)
+        if ids is None or self.tag_id not in ids.ravel():
+            return LOST
+        image_corners = corners[list(ids.ravel()).index(self.tag_id)].reshape(4, 2).astype(np.float64)
+        ok, rvec, tvec = cv2.solvePnP(self.marker_corners, image_corners, self.camera.matrix, self.camera.distortion,
+                                      flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        if not ok:
+            return LOST
+        marker_to_camera = cv2.Rodrigues(rvec)[0]
+        return TagPose(marker_to_camera @ MARKER_TO_WORLD.T, tvec.ravel(), image_corners)
