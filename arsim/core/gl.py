@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from importlib import resources
+
 from arsim.core.errors import ArsimError
 
 # OpenGL 4.3 brings compute shaders and the timer queries the renderer and the profiler use.
@@ -25,3 +27,8 @@ def create_gl_context(require: int = REQUIRED_GL_VERSION):
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ArsimError(f"no headless OpenGL {require // 100}.{require % 100 // 10} context via EGL ({reason}); {_INSTALL_HINT}") from None
     return ctx
+
+
+def core_shader(name: str) -> str:
+    """GLSL shared by the stages (arsim/core/shaders), e.g. anglemap.glsl."""
+    return resources.files("arsim.core").joinpath("shaders", name).read_text(encoding="utf-8")

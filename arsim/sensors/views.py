@@ -12,7 +12,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from arsim.core.conventions import CameraIntrinsics
-from arsim.core.gl import create_gl_context
+from arsim.core.gl import core_shader, create_gl_context
 from arsim.core.resample import extend_beyond_rim, sample_anglemap
 from arsim.sensors.camera import ResponseCurve, SensorSettings, vignette
 from arsim.sensors.table import Table, table_radiance_reference, upward_light
@@ -57,7 +57,7 @@ def _with_alpha(image: np.ndarray) -> np.ndarray:
 def _scene_source(main: str, table: bool, defines: dict[str, int] | None = None) -> str:
     """GLSL of a shader that uses scene.glsl, with the table compiled in or not, and other defines."""
     lines = ["#version 430"] + (["#define TABLE"] if table else []) + [f"#define {k} {v}" for k, v in (defines or {}).items()]
-    return "\n".join(lines) + "\n" + _shader("scene.glsl") + _shader(main)
+    return "\n".join(lines) + "\n" + core_shader("anglemap.glsl") + _shader("scene.glsl") + _shader(main)
 
 
 class EnvironmentRenderer:

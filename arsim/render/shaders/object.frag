@@ -1,0 +1,71 @@
+// Thesis Alg. 5.1 (image-based lighting with an irradiance and a reflection map), 5.2 (an ambient-
+// occlusion light map multiplied into the diffuse part, where LIGHT_MAP is defined) and 5.4 (a
+// tangent-space normal map, where NORMAL_MAP is defined). Writes the HDR colour and the mask; with
+// DEBUG, also the vectors it shaded with, for the NumPy reference to shade the same pixels.
+uniform sampler2D irradiance_map;   // M_1, angle map extended past its rim
+uniform sampler2D reflection_map;   // M_s for this material's exponent
+uniform vec3 kd;
+uniform vec3 ks;
+uniform vec3 eye;                   // camera centre, world
+#ifdef LIGHT_MAP
+uniform sampler2D light_map;
+#endif
+#ifdef NORMAL_MAP
+uniform sampler2D normal_map;
+#endif
+
+in vec3 v_world;
+in vec3 v_normal;
+in vec3 v_tangent;
+in vec2 v_uv;
+in vec2 v_uv2;
+
+layout(location = 0) out vec4 hdr;
+layout(location = 1) out vec4 mask;
+#ifdef DEBUG
+layout(location = 2) out vec4 debug_normal;
+layout(location = 3) out vec4 debug_incident;
+#endif
+
+// The map's value in direction d: bilinear between texel centres, in an angle-map texture whose row 0 is
+// the map's top row (t = 1) and whose texels outside the disk repeat the rim. The weights are computed
+// here in float: texture units filter with 8-bit weights (llvmpipe too), which on a sharp reflection
+// map moves a value by up to 5e-4 of itself, half of what the GL path may differ from the reference.
+vec3 lookup(sampler2D map, vec3 d) {
+    vec2 st = anglemap_st(d);
+    ivec2 size = textureSize(map, 0);
+    vec2 p = vec2(st.x, 1.0 - st.y) * vec2(size) - 0.5;
+    vec2 f = floor(p);
+    vec2 a = p - f;
+    ivec2 i = ivec2(f);
+    ivec2 hi = size - 1;
+    vec3 c00 = texelFetch(map, clamp(i, ivec2(0), hi), 0).rgb;
+    vec3 c10 = texelFetch(map, clamp(i + ivec2(1, 0), ivec2(0), hi), 0).rgb;
+    vec3 c01 = texelFetch(map, clamp(i + ivec2(0, 1), ivec2(0), hi), 0).rgb;
+    vec3 c11 = texelFetch(map, clamp(i + ivec2(1, 1), ivec2(0), hi), 0).rgb;
+    return mix(mix(c00, c10, a.x), mix(c01, c11, a.x), a.y);
+}
+
+void main() {
+    vec3 n = normalize(v_normal);
+#ifdef NORMAL_MAP
+    vec3 n_t = texture(normal_map, v_uv).xyz * 2.0 - 1.0;   // eq. 5.2
+    vec3 t = normalize(v_tangent);
+    vec3 b = cross(n, t);
+    n = normalize(mat3(t, b, n) * n_t);
+#endif
+    vec3 v = normalize(v_world - eye);
+    vec3 light = vec3(1.0);
+#ifdef LIGHT_MAP
+    light = texture(light_map, v_uv2).rgb;
+#endif
+    // Alg. 5.4 line 9 uses the unperturbed n_w here, a typo for n (see render/shading.py).
+    vec3 diffuse = lookup(irradiance_map, n) * light;
+    vec3 specular = lookup(reflection_map, reflect(v, n));
+    hdr = vec4(kd * diffuse + ks * specular, 1.0);
+    mask = vec4(1.0);
+#ifdef DEBUG
+    debug_normal = vec4(n, light.r);
+    debug_incident = vec4(v, 0.0);
+#endif
+}

@@ -1,0 +1,127 @@
+"""The renderer's GL path against its NumPy reference: image-based lighting with light and normal maps
+in the HDR buffer, the masked Reinhard tone mapping in 8 bits, the mip-chain average; and light maps
+and normal maps changing exactly the pixels they should."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from arsim.core.conventions import CameraIntrinsics
+from arsim.core.gl import create_gl_context
+from arsim.core.hdr_io import read_hdr
+from arsim.core.resample import to_layout
+from arsim.lighting.fast import fast_maps
+from arsim.render import shading
+from arsim.render.meshes import uv_sphere
+from arsim.render.renderer import Material, Renderer, SceneObject
+from tests.conftest import ENVMAPS
+
+CAMERA = CameraIntrinsics.from_fov(320, 240, 60.0)
+KD, KS = (0.6, 0.5, 0.4), (0.3, 0.3, 0.3)
+
+
+@pytest.fixture(scope="module")
+def gl():
+    return create_gl_context()  # one context for every renderer here: a second would become the current one
+
+
+@pytest.fixture(scope="module")
+def maps():
+    env = to_layout(read_hdr(ENVMAPS[1]), "anglemap", 128)
+    return dict(zip((1.0, 80.0), fast_maps(env, (1.0, 80.0))))
+
+
+def look_at(eye, target):
+    """OpenCV world-to-camera rotation and translation of a camera at eye looking at target (y up)."""
+    z = (np.asarray(target) - eye) / np.linalg.norm(np.asarray(target) - eye)
+    x = np.cross(z, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    r = np.stack([x, np.cross(z, x), z])
+    return Rotation.from_matrix(r), -r @ eye
+
+
+def bumps():
+    """A tangent-space normal map (64 x 128): bumps in the left half of u, flat in the right half."""
+    y, x = np.mgrid[0:64, 0:128]
+    texel = np.zeros((64, 128, 3))
+    texel[..., 0] = np.where(x < 64, 0.5 + 0.3 * np.sin(x / 3.0), 0.5)
+    texel[..., 1] = np.where(x < 64, 0.5 + 0.3 * np.cos(y / 2.5), 0.5)
+    texel[..., 2] = 1.0
+    return texel
+
+
+def shadow():
+    """An ambient-occlusion light map (64 x 128): 0.3 in the upper half of v (rows at the top), 1 below."""
+    return np.where(np.arange(64)[:, None, None] < 32, 0.3, 1.0) * np.ones((64, 128, 3))
+
+
+def render(gl, maps, material, debug=False):
+    r = Renderer(CAMERA, maps, gl, debug=debug)
+    model = np.eye(4)
+    model[:3, 3] = [0.0, 0.1, 0.0]
+    r.add(SceneObject(uv_sphere(0.1), material, model))
+    r.render_objects(*look_at(np.array([0.05, 0.35, 0.3]), [0.0, 0.1, 0.0]))
+    return r
+
+
+@pytest.mark.parametrize("with_maps", [False, True])
+def test_gl_shading_equals_the_numpy_reference(gl, maps, with_maps):
+    """Shaded with the vectors GL interpolated (read back from debug targets), the NumPy equations give
+    the HDR buffer within 1e-3 relative: RGBA16F rounds to 2^-11, and GL's float32 result may round to
+    the neighbouring half float, 2^-10 = 9.8e-4 of the value at most."""
+    material = Material(KD, KS, 80.0, shadow() if with_maps else None, bumps() if with_maps else None)
+    r = render(gl, maps, material, debug=True)
+    hdr, mask = r.read_hdr(), r.read_mask() > 0.5
+    normal, incident = r.read_debug()
+    assert 0.03 < mask.mean() < 0.5
+    light = normal[mask][:, 3:4].astype(np.float64) if with_maps else None
+    reference = shading.shade(normal[mask][:, :3].astype(np.float64), incident[mask][:, :3].astype(np.float64),
+                              maps[1.0], maps[80.0], np.array(KD), np.array(KS), light)
+    rel = np.abs(hdr[mask] - reference) / np.abs(reference)
+    assert rel.max() < 1e-3
+
+
+@pytest.mark.parametrize("key, white", [(0.18, 2.0), (0.72, 0.8)])
+def test_tone_mapping_equals_the_numpy_reference_within_one_step(gl, maps, key, white):
+    r = render(gl, maps, Material(KD, KS, 80.0))
+    background = np.random.default_rng(0).integers(0, 256, (CAMERA.height, CAMERA.width, 3), dtype=np.uint8)
+    out = r.tonemap(background, key, white)
+    hdr, mask = r.read_hdr(), r.read_mask()
+    # The mip chain's top is the masked mean (the targets are padded to powers of two), up to half floats.
+    assert r.mip_average() == pytest.approx(shading.average_luminance(hdr, mask), rel=5e-3)
+    reference = shading.tonemap(hdr, mask, key, white, r.mip_average())
+    inside = mask > 0.5
+    expected = np.where(inside[..., None], np.clip(np.round(reference * 255), 0, 255), background)
+    assert np.abs(out.astype(int) - expected.astype(int)).max() <= 1
+    assert (out[~inside] == background[~inside]).all()  # the camera image passes where nothing is drawn
+
+
+def test_light_maps_and_normal_maps_change_exactly_their_pixels(gl, maps):
+    plain = render(gl, maps, Material(KD, KS, 80.0), debug=True)
+    lit = render(gl, maps, Material(KD, KS, 80.0, light_map=shadow()), debug=True)
+    bumped = render(gl, maps, Material(KD, KS, 80.0, normal_map=bumps()), debug=True)
+    mask = plain.read_mask() > 0.5
+    base = plain.read_hdr()
+    # The light map's value per pixel (debug w): 0.3 must darken the diffuse part, 1 must change nothing.
+    light = lit.read_debug()[0][..., 3]
+    dark, bright = mask & (light < 0.31), mask & (light > 0.999)
+    assert dark.sum() > 200 and bright.sum() > 200
+    assert (lit.read_hdr()[dark] < 0.97 * base[dark]).all()
+    # (a different shader variant: equal up to the HDR buffer's precision, one half-float step)
+    np.testing.assert_allclose(lit.read_hdr()[bright], base[bright], rtol=1e-3, atol=0)
+    # The normal map: its flat half (u > 0.5: longitudes pi..2 pi, world x < 0 on this sphere) keeps the
+    # geometric normal and the pixels; its bumpy half turns them. Longitude from the geometric normal,
+    # kept 0.6 rad (12 texels) from the halves' borders and away from the poles (where the longitudes
+    # crowd, minification picks coarse mip levels) and from the silhouette (the same at grazing angles),
+    # beyond the reach of the texture's filtering.
+    n_plain, n_bumped = plain.read_debug()[0][..., :3], bumped.read_debug()[0][..., :3]
+    turned = np.degrees(np.arccos(np.clip(np.sum(n_plain * n_bumped, -1), -1, 1)))
+    longitude = np.arctan2(n_plain[..., 0], n_plain[..., 2])
+    facing = -np.sum(n_plain * plain.read_debug()[1][..., :3], -1)
+    band = mask & (np.abs(n_plain[..., 1]) < 0.7) & (facing > 0.3)
+    east = band & (longitude > 0.6) & (longitude < np.pi - 0.6)
+    west = band & (longitude < -0.6) & (longitude > -np.pi + 0.6)
+    assert west.sum() > 200 and east.sum() > 200
+    assert np.median(turned[east]) > 5.0 and np.mean(np.abs(bumped.read_hdr()[east] - base[east]) > 1e-3 * base[east]) > 0.5
+    assert turned[west].max() < 0.1  # (coarse mip levels reach in from the bumpy half by a few hundredths)
+    np.testing.assert_allclose(bumped.read_hdr()[west], base[west], rtol=1e-3, atol=0)
