@@ -125,3 +125,15 @@ def test_light_maps_and_normal_maps_change_exactly_their_pixels(gl, maps):
     assert np.median(turned[east]) > 5.0 and np.mean(np.abs(bumped.read_hdr()[east] - base[east]) > 1e-3 * base[east]) > 0.5
     assert turned[west].max() < 0.1  # (coarse mip levels reach in from the bumpy half by a few hundredths)
     np.testing.assert_allclose(bumped.read_hdr()[west], base[west], rtol=1e-3, atol=0)
+
+
+def test_the_torus_occlusion_is_open_on_top_and_closed_where_it_touches_the_table():
+    from arsim.render.content import bake_torus_occlusion
+
+    ao = bake_torus_occlusion(size=(32, 16), rays=64)[..., 0]
+    row = (lambda v: 31 - int(v * 32))  # row 0 holds v = 1
+    assert ao.min() >= 0.0 and ao.max() <= 1.0
+    assert ao[row(0.25)].min() > 0.95  # the top of the ring sees the sky (this texel tilts 2 degrees to the hole)
+    assert ao[row(0.75)].max() < 0.05  # its underside rests on the table
+    # the inner equator faces the hole (the ring opposite, the table): darker than the outer one
+    assert ao[row(0.5)].mean() < ao[row(0.01)].mean() - 0.1

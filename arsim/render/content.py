@@ -1,0 +1,118 @@
+"""The virtual objects the AR session places on the tag (thesis figure 5.3 and 5.1): a row of spheres
+with Phong exponents from 1 to 1280, and a torus, non-convex, with a tangent-space normal map and an
+ambient-occlusion light map that arsim bakes itself by casting rays against the torus and the table.
+
+Object space: y up, the object standing on the table plane y = 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from arsim.core.conventions import normalize
+from arsim.render.meshes import Mesh
+
+SPHERE_EXPONENTS = (1.0, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0)  # thesis figure 5.3
+
+
+def torus_surface(u: np.ndarray, v: np.ndarray, major: float, minor: float) -> tuple[np.ndarray, ...]:
+    """Points, normals and tangents (along increasing u) of a torus around the y axis resting on y = 0:
+    u runs around the ring, v around the tube (v = 0 on its outer equator, 0.25 on top)."""
+    a, b = 2.0 * np.pi * np.asarray(u), 2.0 * np.pi * np.asarray(v)
+    ring = np.stack([np.sin(a), np.zeros_like(a), np.cos(a)], axis=-1)
+    up = np.array([0.0, 1.0, 0.0])
+    normal = ring * np.cos(b)[..., None] + up * np.sin(b)[..., None]
+    point = ring * major + normal * minor + up * minor
+    tangent = np.stack([np.cos(a), np.zeros_like(a), -np.sin(a)], axis=-1)
+    return point, normal, tangent
+
+
+def torus(major: float = 0.05, minor: float = 0.02, rings: int = 96, segments: int = 48) -> Mesh:
+    """The torus mesh; both UV sets are (u, v) (the light map is baked in the same parameterisation)."""
+    u, v = np.meshgrid(np.linspace(0.0, 1.0, rings + 1), np.linspace(0.0, 1.0, segments + 1), indexing="ij")
+    point, normal, tangent = torus_surface(u, v, major, minor)
+    uvs = np.stack([u, v], axis=-1)
+    r, s = np.meshgrid(np.arange(rings), np.arange(segments), indexing="ij")
+    a = r * (segments + 1) + s
+    b, c, d = a + segments + 1, a + 1, a + segments + 2
+    indices = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([c, b, d], -1).reshape(-1, 3)])
+    flat = (lambda x: x.reshape(-1, x.shape[-1]).astype(np.float32))
+    return Mesh(flat(point), flat(normal), flat(tangent), flat(uvs), flat(uvs), indices.astype(np.uint32))
+
+
+def torus_distance(p: np.ndarray, major: float, minor: float) -> np.ndarray:
+    """Signed distance to the torus resting on y = 0."""
+    q = np.stack([np.hypot(p[..., 0], p[..., 2]) - major, p[..., 1] - minor], axis=-1)
+    return np.linalg.norm(q, axis=-1) - minor
+
+
+def bake_torus_occlusion(major: float = 0.05, minor: float = 0.02, size: tuple[int, int] = (64, 128),
+                         rays: int = 96, seed: int = 0) -> np.ndarray:
+    """Ambient-occlusion light map (H, W, 3) of the torus on the table, row 0 at v = 1: per texel, the
+    fraction of cosine-weighted rays from the surface that escape the torus and the table top (sphere
+    tracing of the exact distance functions). 1 on the top of the ring, near 0 where it touches the table."""
+    h, w = size
+    v, u = np.meshgrid((h - 1 - np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    point, normal, _ = torus_surface(u, v, major, minor)
+    rng = np.random.default_rng(seed)
+    # Cosine-weighted directions around each normal (stratified in the two random numbers).
+    xi = (np.stack(np.meshgrid(np.arange(int(np.sqrt(rays))), np.arange(int(np.sqrt(rays))), indexing="ij"), -1).reshape(-1, 2)
+          + rng.random((int(np.sqrt(rays)) ** 2, 2))) / int(np.sqrt(rays))
+    radius, angle = np.sqrt(xi[:, 0]), 2.0 * np.pi * xi[:, 1]
+    local = np.stack([radius * np.cos(angle), radius * np.sin(angle), np.sqrt(1.0 - xi[:, 0])], -1)
+    helper = np.where(np.abs(normal[..., 1:2]) < 0.9, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    t_axis = normalize(np.cross(helper, normal))
+    b_axis = np.cross(normal, t_axis)
+    directions = (local[:, 0, None, None, None] * t_axis + local[:, 1, None, None, None] * b_axis
+                  + local[:, 2, None, None, None] * normal)  # (R, H, W, 3)
+    origin = point + normal * (1e-3 * minor)
+    travelled = np.full(directions.shape[:-1], 1e-3 * minor)
+    hit = np.zeros(directions.shape[:-1], dtype=bool)
+    reach = 6.0 * (major + minor)
+    for _ in range(96):  # sphere tracing: each step the distance to the nearest surface
+        p = origin + directions * travelled[..., None]
+        distance = np.minimum(torus_distance(p, major, minor), p[..., 1])
+        hit |= distance < 1e-4 * minor
+        travelled = np.where(hit, travelled, travelled + np.maximum(distance, 1e-5 * minor))
+        if ((travelled > reach) | hit).all():
+            break
+    visible = ~hit & (directions[..., 1] > -1.0)
+    occlusion = visible.mean(axis=0)
+    return np.repeat(occlusion[..., None], 3, axis=-1).astype(np.float32)
+
+
+def ridges_normal_map(size: tuple[int, int] = (128, 256), ridges: tuple[int, int] = (24, 8),
+                      depth: float = 0.6) -> np.ndarray:
+    """A tangent-space normal map (H, W, 3) in [0, 1] (eq. 5.1) of a height field of crossed ridges
+    h = depth sin(2 pi k u) sin(2 pi m v) / (2 pi k) (slopes up to `depth`), row 0 at v = 1."""
+    h, w = size
+    v, u = np.meshgrid((h - 1 - np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    k, m = ridges
+    du = depth * np.cos(2 * np.pi * k * u) * np.sin(2 * np.pi * m * v)
+    dv = depth * (m / k) * np.sin(2 * np.pi * k * u) * np.cos(2 * np.pi * m * v)
+    n = normalize(np.stack([-du, -dv, np.ones_like(du)], axis=-1))
+    return (n * 0.5 + 0.5).astype(np.float32)
+
+
+def translation(x: float, y: float, z: float) -> np.ndarray:
+    model = np.eye(4)
+    model[:3, 3] = [x, y, z]
+    return model
+
+
+def standard_objects(sphere_radius: float = 0.016, row_z: float = -0.14):
+    """The default scene on the tag (world metres, the tag's centre at the origin): the row of spheres
+    behind the tag, glossy, one per exponent of SPHERE_EXPONENTS, and the torus on the tag, matte with
+    its normal map and baked ambient-occlusion light map. Returns SceneObjects."""
+    from arsim.render.meshes import uv_sphere
+    from arsim.render.renderer import Material, SceneObject
+
+    spacing = 2.6 * sphere_radius
+    objects = []
+    for k, exponent in enumerate(SPHERE_EXPONENTS):
+        x = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
+        objects.append(SceneObject(uv_sphere(sphere_radius, 32, 64), Material((0.15, 0.15, 0.15), (0.8, 0.8, 0.8), exponent),
+                                   translation(x, sphere_radius, row_z)))
+    objects.append(SceneObject(torus(), Material((0.7, 0.55, 0.4), (0.2, 0.2, 0.2), 80.0, bake_torus_occlusion(),
+                                                 ridges_normal_map()), translation(0.0, 0.0, 0.0)))
+    return objects
