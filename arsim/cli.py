@@ -11,6 +11,7 @@ import numpy as np
 
 from arsim import __version__
 from arsim.core.errors import ArsimError
+from arsim.core.files import write_text_atomic
 from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
 from arsim.core.image_stats import image_stats
 from arsim.core.progress import progress_bar
@@ -174,6 +175,48 @@ def cmd_capture(args: argparse.Namespace) -> int:
           f"{metrics['coverage_pct']:.2f} % covered; orientation error RMS {metrics['orientation_rms_deg_corrected']:.2f} degrees "
           f"corrected, {metrics['orientation_rms_deg_uncorrected']:.2f} uncorrected; irradiance map error "
           f"{metrics['irradiance_mean_err_pct']:.2f} %; metrics in {out / 'metrics.json'}")
+    return 0
+
+
+# arsim render
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from arsim.capture.pipeline import CaptureSettings, burst_response, capture
+    from arsim.evaluate.capture_report import filled
+    from arsim.render.session import SessionSettings, run_session
+    from arsim.scenario.environment import load_environment
+    from arsim.sensors.camera import SensorSettings
+
+    scenario = load_scenario(args.scenario)
+    if not scenario.ar.enabled:
+        raise ArsimError(f"{args.scenario or 'the scenario'}: [ar] enabled = false; the session needs the AR path: set it to true")
+    recording_segments(scenario)
+    out = _output_dir(args.output)
+    probe = _probe(args.env, args.map_size) if args.env is not None else None  # read early: a bad file fails first
+    with progress_bar("recording the sweep and the AR path", 1.0) as update:
+        record(scenario, out / "recording", progress=lambda f: update(completed=f))
+    sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
+    if probe is None:
+        with progress_bar("capturing the light probe", 1.0) as update:
+            result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
+        acc = result.accumulator
+        probe = to_layout(filled(acc.probe(), acc.covered()), "anglemap", args.map_size)
+        response = result.response
+    else:
+        response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
+    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=args.map_size))
+    settings = SessionSettings(args.method, args.key, args.white)
+    with progress_bar(f"rendering the AR session ({args.method} maps)", 1.0) as update:
+        session = run_session(ar, response.linear[:, 1], probe, truth, out, settings, progress=lambda f: update(completed=f))
+    metrics = session.metrics() | {"method": args.method, "map_size": args.map_size,
+                                   "probe": str(args.env) if args.env is not None else "captured"}
+    write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: tracking p95 "
+          f"{metrics['tracking_rot_err_deg_p95']:.2f} degrees, {metrics['tracking_trans_err_pct_p95']:.2f} % of the distance; "
+          f"FLIP against the truth frame {metrics['flip_mean']:.4f}; metrics in {out / 'metrics.json'}")
     return 0
 
 
@@ -388,6 +431,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--align-every", type=_positive_int("--align-every"), metavar="K",
                    help="align every K-th metered frame against the probe (default: [capture] align_every, 1)")
     p.set_defaults(run=cmd_capture)
+
+    p = _command(sub, "render", "run the AR session: record the scenario, capture the probe (or take --env), track the tag, "
+                 "render the virtual objects lit by the maps, tone-map them over the camera frames, and compare each "
+                 "frame with the truth frame (the objects lit by the true environment's maps) by FLIP",
+                 "arsim render -o session   (or: arsim render scenarios/indoor.toml -o session --env probe.exr --method sh)")
+    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
+                   help="scenario .toml (default: the embedded default scenario)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("--env", type=Path, metavar="PROBE.exr", help="light the objects with this environment instead of the captured probe")
+    p.add_argument("--method", choices=sorted(METHODS), default="fast", help="map method (default: fast)")
+    p.add_argument("--map-size", type=_map_size, default=128, metavar="N", help="N of the N x N maps (default: 128)")
+    p.add_argument("--key", type=float, default=0.18, help="Reinhard's key a (default: 0.18)")
+    p.add_argument("--white", type=float, default=2.0, help="Reinhard's L_white (default: 2.0)")
+    p.set_defaults(run=cmd_render)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")

@@ -44,17 +44,11 @@ class TrackingRun:
         }
 
 
-def track_recording(rec: Recording, linear_of_code: np.ndarray | None = None,
-                    progress: Callable[[float], None] = lambda fraction: None) -> TrackingRun:
-    """Track the tag through an AR recording's frames and measure every pose against the truth;
-    linear_of_code: the camera's inverse response (256,), e.g. the capture's, to linearise the frames."""
-    table = rec.meta["table"]
-    tracker = TagTracker(recording_camera(rec), table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+def measure_poses(rec: Recording, poses: list[TagPose]) -> TrackingRun:
+    """Every tracked pose of an AR recording's frames against the truth."""
     views, positions = frame_camera_orientations(rec), frame_positions(rec)
-    poses, rot, mm, pct = [], [], [], []
-    for k, frame in enumerate(rec.frames):
-        pose = tracker.track(read_frame(rec.folder / frame["file"]))
-        poses.append(pose)
+    rot, mm, pct = [], [], []
+    for k, pose in enumerate(poses):
         if pose.found:
             true_world_to_camera = views[k].inv().as_matrix()
             cos = (np.trace(pose.rotation @ true_world_to_camera.T) - 1) / 2
@@ -64,7 +58,19 @@ def track_recording(rec: Recording, linear_of_code: np.ndarray | None = None,
             pct.append(100 * error / np.linalg.norm(positions[k]))
         else:
             rot.append(np.inf), mm.append(np.inf), pct.append(np.inf)
+    return TrackingRun(poses, tag_in_view(rec), np.array(rot), np.array(mm), np.array(pct))
+
+
+def track_recording(rec: Recording, linear_of_code: np.ndarray | None = None,
+                    progress: Callable[[float], None] = lambda fraction: None) -> TrackingRun:
+    """Track the tag through an AR recording's frames and measure every pose against the truth;
+    linear_of_code: the camera's inverse response (256,), e.g. the capture's, to linearise the frames."""
+    table = rec.meta["table"]
+    tracker = TagTracker(recording_camera(rec), table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+    poses = []
+    for k, frame in enumerate(rec.frames):
+        poses.append(tracker.track(read_frame(rec.folder / frame["file"])))
         if k % 20 == 0:
             progress((k + 1) / len(rec.frames))
     progress(1.0)
-    return TrackingRun(poses, tag_in_view(rec), np.array(rot), np.array(mm), np.array(pct))
+    return measure_poses(rec, poses)

@@ -141,6 +141,11 @@ class Renderer:
     def tonemap(self, background: np.ndarray, key: float = 0.18, white: float = 2.0) -> np.ndarray:
         """Step 7: Reinhard's operator on the masked pixels over the camera frame (H, W, 3) uint8; the
         8-bit result (H, W, 3), row 0 at the top."""
+        self.tonemap_pass(background, key, white)
+        return self.read_output()
+
+    def tonemap_pass(self, background: np.ndarray, key: float = 0.18, white: float = 2.0) -> None:
+        """Step 7 into the output target, without reading it back."""
         self.hdr.build_mipmaps()
         self.mask.build_mipmaps()
         program, vao = self._tonemapper(False)
@@ -153,7 +158,6 @@ class Renderer:
         self.output_fbo.use()
         vao.render(vertices=3)
         frame.release()
-        return self._read(self.output, 4, "f1")[..., :3]
 
     def _read(self, texture, components: int, dtype: str, level: int = 0) -> np.ndarray:
         """A texture level as an image, row 0 at the top; level 0 cropped to the frame."""
@@ -163,6 +167,10 @@ class Renderer:
         if level == 0:
             data = data[:self.camera.height, :self.camera.width]
         return data[::-1].astype(np.float32 if dtype != "f1" else np.uint8)
+
+    def read_output(self) -> np.ndarray:
+        """The tone-mapped frame (H, W, 3) uint8 of the last tonemap_pass."""
+        return self._read(self.output, 4, "f1")[..., :3]
 
     def read_hdr(self) -> np.ndarray:
         return self._read(self.hdr, 4, "f2")[..., :3]

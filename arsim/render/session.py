@@ -1,0 +1,145 @@
+"""The AR session (thesis 5.1): per frame, the tag's pose from the tracker, the virtual objects drawn
+into the HDR colour and the mask with the maps from the captured probe, and the masked tone mapping
+over the camera frame; beside it the truth frame, the same objects lit by maps from the true
+environment, and the FLIP difference between the two inside the mask. Each step is timed on the CPU
+and, for the GL passes, with timer queries.
+
+Map baking inside the frame loop (step 3) and the overlay (step 7's UI) are not part of this loop yet.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from arsim.capture.pipeline import read_frame
+from arsim.core.files import atomic_path, write_bytes_atomic
+from arsim.core.gl import create_gl_context
+from arsim.core.png import png_bytes
+from arsim.evaluate.recording_plots import recording_camera
+from arsim.evaluate.tracking import TrackingRun, measure_poses
+from arsim.lighting.methods import bake
+from arsim.render.content import standard_objects
+from arsim.render.renderer import Renderer
+from arsim.sensors.recording import Recording
+from arsim.tracking.apriltag import TagTracker
+
+STEPS = ("track", "objects", "tone_mapping", "truth_frame", "readback")
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    method: str = "fast"  # map method for the captured probe (and the truth frame's maps)
+    key: float = 0.18  # Reinhard's a
+    white: float = 2.0  # L_white
+    saved_frames: Sequence[int] = ()  # frame indices written as PNG (default: four spread over the path)
+
+
+@dataclass
+class SessionResult:
+    tracking: TrackingRun
+    flip: np.ndarray  # (K,) mean FLIP inside the mask; nan where no object was drawn
+    step_ms: dict[str, list[float]] = field(default_factory=dict)  # CPU ms per step per frame
+    gl_ms: dict[str, list[float]] = field(default_factory=dict)  # GL ms per GL step per frame
+
+    def metrics(self) -> dict:
+        drawn = np.isfinite(self.flip)
+        return self.tracking.metrics() | {
+            "flip_mean": float(np.mean(self.flip[drawn])) if drawn.any() else float("nan"),
+            "flip_per_frame": [None if not np.isfinite(f) else float(f) for f in self.flip],
+            "step_ms": {name: float(np.median(v)) for name, v in self.step_ms.items() if v},
+            "step_gl_ms": {name: float(np.median(v)) for name, v in self.gl_ms.items() if v},
+        }
+
+
+def session_maps(probe: np.ndarray, exponents: Sequence[float], method: str) -> dict[float, np.ndarray]:
+    maps = bake(probe, list(exponents), method).maps
+    return {float(s): m for s, m in zip(exponents, maps)}
+
+
+FLIP_MARGIN = 32  # pixels around the mask's bounding box: beyond FLIP's filters at its default 67 pixels per degree
+
+
+def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
+    """Mean FLIP (LDR, sRGB inputs) of two 8-bit frames over the masked pixels, evaluated on the mask's
+    bounding box widened by FLIP_MARGIN (the whole frame costs most of a second at 640 x 480)."""
+    import flip_evaluator
+
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    box = (slice(max(rows[0] - FLIP_MARGIN, 0), rows[-1] + FLIP_MARGIN + 1),
+           slice(max(cols[0] - FLIP_MARGIN, 0), cols[-1] + FLIP_MARGIN + 1))
+    error, _, _ = flip_evaluator.evaluate(np.ascontiguousarray(reference[box], dtype=np.float32) / 255,
+                                          np.ascontiguousarray(test[box], dtype=np.float32) / 255, "LDR", applyMagma=False)
+    error = np.asarray(error)
+    return float((error[..., 0] if error.ndim == 3 else error)[mask[box]].mean())
+
+
+def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, truth: np.ndarray, out_dir: Path,
+                settings: SessionSettings = SessionSettings(),
+                progress: Callable[[float], None] = lambda fraction: None) -> SessionResult:
+    """Run the AR session over an AR recording (rec: its ar/ part) with maps from `probe` (the captured
+    angle map) and truth frames from `truth` (the true one); writes frames/*.png and session.mp4 into
+    out_dir."""
+    ctx = create_gl_context()
+    camera = recording_camera(rec)
+    table = rec.meta["table"]
+    tracker = TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+    objects = standard_objects()
+    exponents = sorted({1.0} | {o.material.exponent for o in objects})
+    renderers = []
+    for env in (probe, truth):
+        renderer = Renderer(camera, session_maps(env, exponents, settings.method), ctx)
+        for obj in objects:
+            renderer.add(obj)
+        renderers.append(renderer)
+    captured, true_light = renderers
+    count = len(rec.frames)
+    saved = set(settings.saved_frames or np.linspace(0, count - 1, 4).round().astype(int).tolist())
+    (out_dir / "frames").mkdir(parents=True, exist_ok=True)
+    step_ms = {name: [] for name in STEPS}
+    gl_ms = {"objects": [], "tone_mapping": []}
+    query = ctx.query(time=True)
+    poses, flips = [], np.full(count, np.nan)
+    fps = rec.meta["camera"].get("fps", 30.0)
+    with atomic_path(out_dir / "session.mp4") as video_path:
+        video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
+        for k, info in enumerate(rec.frames):
+            frame = read_frame(rec.folder / info["file"])
+            start = time.perf_counter()
+            pose = tracker.track(frame)
+            step_ms["track"].append(1000 * (time.perf_counter() - start))
+            poses.append(pose)
+            out = frame
+            if pose.found:  # lost frames draw no object (as the thesis's app)
+                rotation = Rotation.from_matrix(pose.rotation)
+                for name, work in (("objects", lambda: captured.render_objects(rotation, pose.translation)),
+                                   ("tone_mapping", lambda: captured.tonemap_pass(frame, settings.key, settings.white))):
+                    ctx.finish()
+                    start = time.perf_counter()
+                    with query:
+                        work()
+                    ctx.finish()
+                    step_ms[name].append(1000 * (time.perf_counter() - start))
+                    gl_ms[name].append(query.elapsed / 1e6)
+                start = time.perf_counter()
+                out = captured.read_output()
+                mask = captured.read_mask() > 0.5
+                step_ms["readback"].append(1000 * (time.perf_counter() - start))
+                start = time.perf_counter()
+                true_light.render_objects(rotation, pose.translation)
+                truth_frame = true_light.tonemap(frame, settings.key, settings.white)
+                flips[k] = masked_flip(truth_frame, out, mask) if mask.any() else np.nan
+                step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
+            video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))
+            if k in saved:
+                write_bytes_atomic(out_dir / "frames" / f"{k:06d}.png", png_bytes(out))
+            if k % 10 == 0 or k == count - 1:
+                progress((k + 1) / count)
+        video.release()
+    return SessionResult(measure_poses(rec, poses), flips, step_ms, gl_ms)
