@@ -71,7 +71,7 @@ class Renderer:
         self.objects: list[tuple[SceneObject, object, object, dict]] = []
         self.output = self.ctx.texture(size, 4, dtype="f1")
         self.output_fbo = self.ctx.framebuffer([self.output])
-        self.tonemappers = {}
+        self.tonemapper = None
 
     def _map_texture(self, anglemap: np.ndarray):
         data = np.ascontiguousarray(extend_beyond_rim(anglemap).astype(np.float32))
@@ -128,12 +128,11 @@ class Renderer:
             vao.render()
         self.ctx.disable(self.ctx.DEPTH_TEST)
 
-    def _tonemapper(self, log_average: bool):
-        if log_average not in self.tonemappers:
-            defines = ["LOG_AVERAGE"] if log_average else []
-            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("tonemap.frag", defines))
-            self.tonemappers[log_average] = (program, self.ctx.vertex_array(program, []))
-        return self.tonemappers[log_average]
+    def _tonemapper(self):
+        if self.tonemapper is None:
+            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("tonemap.frag", []))
+            self.tonemapper = (program, self.ctx.vertex_array(program, []))
+        return self.tonemapper
 
     def top_level(self) -> int:
         return int(np.log2(max(self.hdr.width, self.hdr.height)))
@@ -148,7 +147,7 @@ class Renderer:
         """Step 7 into the output target, without reading it back."""
         self.hdr.build_mipmaps()
         self.mask.build_mipmaps()
-        program, vao = self._tonemapper(False)
+        program, vao = self._tonemapper()
         frame = self.ctx.texture((self.camera.width, self.camera.height), 3, np.ascontiguousarray(background).tobytes())
         for unit, (name, tex) in enumerate([("hdr", self.hdr), ("mask", self.mask), ("background", frame)]):
             tex.use(unit)

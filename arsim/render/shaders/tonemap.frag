@@ -1,7 +1,7 @@
 // Thesis Alg. 5.5: Reinhard's eq. 5.5 applied where the mask is set, over the LDR camera image. The
 // average luminance of the masked pixels comes from the top of the mip chains of the HDR colour and of
 // the mask (mean colour / mean mask); line 6 of the algorithm samples the mask texture there, a typo
-// for the colour texture. With LOG_AVERAGE, Reinhard's log-average instead (its own mip chain).
+// for the colour texture.
 uniform sampler2D hdr;
 uniform sampler2D mask;
 uniform sampler2D background;       // the camera frame (display-referred, row 0 at the top)
@@ -10,9 +10,6 @@ uniform float white;                // L_white
 uniform float top_level;            // the 1 x 1 mip level (the targets are a power of two on each side,
                                     // the frame in their lower-left corner and zeros around it, so that
                                     // every level halves exactly and the top is the mean)
-#ifdef LOG_AVERAGE
-uniform sampler2D log_luminance;    // log(delta + L_w) x mask, mipmapped
-#endif
 
 in vec2 uv;
 out vec4 colour;
@@ -25,11 +22,7 @@ void main() {
     float l_w = dot(c_w, LUMA);
     float m = texelFetch(mask, pixel, 0).r;
     float coverage = max(textureLod(mask, vec2(0.5), top_level).r, 1e-12);
-#ifdef LOG_AVERAGE
-    float average = exp(textureLod(log_luminance, vec2(0.5), top_level).r / coverage);
-#else
     float average = dot(textureLod(hdr, vec2(0.5), top_level).rgb, LUMA) / coverage;
-#endif
     float l = key * l_w / average;
     float l_d = l * (1.0 + l / (white * white)) / (1.0 + l);
     // Line 9 multiplies C_w by L_d; scaling the colour to luminance L_d is what it means.
