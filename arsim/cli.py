@@ -208,7 +208,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     else:
         response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=args.map_size))
-    settings = SessionSettings(args.method, args.key, args.white)
+    settings = SessionSettings(args.method, args.key, args.white, every=args.every)
     with progress_bar(f"rendering the AR session ({args.method} maps)", 1.0) as update:
         session = run_session(ar, response.linear[:, 1], probe, truth, out, settings, progress=lambda f: update(completed=f))
     metrics = session.metrics() | {"method": args.method, "map_size": args.map_size,
@@ -266,6 +266,18 @@ def _exponents(text: str) -> list[float]:
             raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()} is given twice; give each once")
         values.append(value)
     return values
+
+
+def _positive_float(name: str):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} {text!r} is not a number") from None
+        if not value > 0 or not np.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{name} {value:g} is out of range: give a positive number")
+        return value
+    return parse
 
 
 def _positive_int(name: str):
@@ -442,8 +454,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env", type=Path, metavar="PROBE.exr", help="light the objects with this environment instead of the captured probe")
     p.add_argument("--method", choices=sorted(METHODS), default="fast", help="map method (default: fast)")
     p.add_argument("--map-size", type=_map_size, default=128, metavar="N", help="N of the N x N maps (default: 128)")
-    p.add_argument("--key", type=float, default=0.18, help="Reinhard's key a (default: 0.18)")
-    p.add_argument("--white", type=float, default=2.0, help="Reinhard's L_white (default: 2.0)")
+    p.add_argument("--key", type=_positive_float("--key"), default=0.18, help="Reinhard's key a (default: 0.18)")
+    p.add_argument("--white", type=_positive_float("--white"), default=2.0, help="Reinhard's L_white (default: 2.0)")
+    p.add_argument("--every", type=_positive_int("--every"), default=1, metavar="K",
+                   help="render every K-th frame of the AR path (default: 1, all)")
     p.set_defaults(run=cmd_render)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",

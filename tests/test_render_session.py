@@ -56,7 +56,10 @@ def test_render_with_the_true_environment_matches_the_truth_frames(tmp_path):
     assert np.mean(np.any(rendered != camera, axis=-1)) > 0.01
 
 
-def test_render_refuses_a_scenario_without_an_ar_path(tmp_path):
+def test_render_refuses_bad_input_in_one_line(tmp_path):
     (tmp_path / "s.toml").write_text("[ar]\nenabled = false\n")
-    r = arsim("render", tmp_path / "s.toml", "-o", tmp_path / "out")
-    assert_one_line_error(r, "enabled = false")
+    assert_one_line_error(arsim("render", tmp_path / "s.toml", "-o", tmp_path / "out"), "enabled = false")
+    assert_one_line_error(arsim("render", "-o", tmp_path / "out", "--key", "0"), "--key")
+    assert_one_line_error(arsim("render", "-o", tmp_path / "out", "--every", "0"), "--every")
+    assert_one_line_error(arsim("render", "-o", tmp_path / "out", "--map-size", "0"), "size")
+    assert not (tmp_path / "out").exists()

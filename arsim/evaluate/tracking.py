@@ -44,9 +44,10 @@ class TrackingRun:
         }
 
 
-def measure_poses(rec: Recording, poses: list[TagPose]) -> TrackingRun:
-    """Every tracked pose of an AR recording's frames against the truth."""
-    views, positions = frame_camera_orientations(rec), frame_positions(rec)
+def measure_poses(rec: Recording, poses: list[TagPose], frames: np.ndarray | None = None) -> TrackingRun:
+    """Tracked poses of an AR recording's frames (all, or those at the indices `frames`) against the truth."""
+    frames = np.arange(len(rec.frames)) if frames is None else np.asarray(frames)
+    views, positions = frame_camera_orientations(rec)[frames], frame_positions(rec)[frames]
     rot, mm, pct = [], [], []
     for k, pose in enumerate(poses):
         if pose.found:
@@ -58,7 +59,7 @@ def measure_poses(rec: Recording, poses: list[TagPose]) -> TrackingRun:
             pct.append(100 * error / np.linalg.norm(positions[k]))
         else:
             rot.append(np.inf), mm.append(np.inf), pct.append(np.inf)
-    return TrackingRun(poses, tag_in_view(rec), np.array(rot), np.array(mm), np.array(pct))
+    return TrackingRun(poses, tag_in_view(rec)[frames], np.array(rot), np.array(mm), np.array(pct))
 
 
 def track_recording(rec: Recording, linear_of_code: np.ndarray | None = None,

@@ -39,11 +39,13 @@ class SessionSettings:
     key: float = 0.18  # Reinhard's a
     white: float = 2.0  # L_white
     saved_frames: Sequence[int] = ()  # frame indices written as PNG (default: four spread over the path)
+    every: int = 1  # render every k-th frame of the AR path (a quick look; the video holds those frames)
 
 
 @dataclass
 class SessionResult:
     tracking: TrackingRun
+    frames: np.ndarray  # (K,) indices of the AR path's frames rendered
     flip: np.ndarray  # (K,) mean FLIP inside the mask; nan where no object was drawn
     step_ms: dict[str, list[float]] = field(default_factory=dict)  # CPU ms per step per frame
     gl_ms: dict[str, list[float]] = field(default_factory=dict)  # GL ms per GL step per frame
@@ -52,6 +54,7 @@ class SessionResult:
         drawn = np.isfinite(self.flip)
         return self.tracking.metrics() | {
             "flip_mean": float(np.mean(self.flip[drawn])) if drawn.any() else float("nan"),
+            "frames_rendered": [int(k) for k in self.frames],
             "flip_per_frame": [None if not np.isfinite(f) else float(f) for f in self.flip],
             "step_ms": {name: float(np.median(v)) for name, v in self.step_ms.items() if v},
             "step_gl_ms": {name: float(np.median(v)) for name, v in self.gl_ms.items() if v},
@@ -99,18 +102,19 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, t
             renderer.add(obj)
         renderers.append(renderer)
     captured, true_light = renderers
-    count = len(rec.frames)
-    saved = set(settings.saved_frames or np.linspace(0, count - 1, 4).round().astype(int).tolist())
+    indices = np.arange(0, len(rec.frames), settings.every)
+    count = len(indices)
+    saved = set(settings.saved_frames or indices[np.linspace(0, count - 1, 4).round().astype(int)].tolist())
     (out_dir / "frames").mkdir(parents=True, exist_ok=True)
     step_ms = {name: [] for name in STEPS}
     gl_ms = {"objects": [], "tone_mapping": []}
     query = ctx.query(time=True)
     poses, flips = [], np.full(count, np.nan)
-    fps = rec.meta["camera"].get("fps", 30.0)
+    fps = rec.meta["camera"].get("fps", 30.0) / settings.every
     with atomic_path(out_dir / "session.mp4") as video_path:
         video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
-        for k, info in enumerate(rec.frames):
-            frame = read_frame(rec.folder / info["file"])
+        for n, k in enumerate(indices):
+            frame = read_frame(rec.folder / rec.frames[k]["file"])
             start = time.perf_counter()
             pose = tracker.track(frame)
             step_ms["track"].append(1000 * (time.perf_counter() - start))
@@ -134,12 +138,12 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, t
                 start = time.perf_counter()
                 true_light.render_objects(rotation, pose.translation)
                 truth_frame = true_light.tonemap(frame, settings.key, settings.white)
-                flips[k] = masked_flip(truth_frame, out, mask) if mask.any() else np.nan
+                flips[n] = masked_flip(truth_frame, out, mask) if mask.any() else np.nan
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
             video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))
             if k in saved:
                 write_bytes_atomic(out_dir / "frames" / f"{k:06d}.png", png_bytes(out))
-            if k % 10 == 0 or k == count - 1:
-                progress((k + 1) / count)
+            if n % 10 == 0 or n == count - 1:
+                progress((n + 1) / count)
         video.release()
-    return SessionResult(measure_poses(rec, poses), flips, step_ms, gl_ms)
+    return SessionResult(measure_poses(rec, poses, indices), indices, flips, step_ms, gl_ms)
