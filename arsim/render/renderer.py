@@ -145,8 +145,7 @@ class Renderer:
 
     def tonemap_pass(self, background: np.ndarray, key: float = 0.18, white: float = 2.0) -> None:
         """Step 7 into the output target, without reading it back."""
-        self.hdr.build_mipmaps()
-        self.mask.build_mipmaps()
+        self.hdr.build_mipmaps()  # its alpha is the mask's coverage: the mask itself needs no chain
         program, vao = self._tonemapper()
         frame = self.ctx.texture((self.camera.width, self.camera.height), 3, np.ascontiguousarray(background).tobytes())
         for unit, (name, tex) in enumerate([("hdr", self.hdr), ("mask", self.mask), ("background", frame)]):
@@ -184,6 +183,5 @@ class Renderer:
     def mip_average(self) -> float:
         """The average luminance of the masked pixels as the tone mapper reads it from the mip tops."""
         top = self.top_level()
-        colour = self._read(self.hdr, 4, "f2", top)[0, 0, :3]
-        coverage = self._read(self.mask, 1, "f2", top)[0, 0, 0]
-        return float(colour @ TONEMAP_LUMA / max(coverage, 1e-12))
+        mean = self._read(self.hdr, 4, "f2", top)[0, 0]
+        return float(mean[:3] @ TONEMAP_LUMA / max(mean[3], 1e-12))

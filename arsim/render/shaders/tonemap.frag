@@ -1,7 +1,8 @@
 // Thesis Alg. 5.5: Reinhard's eq. 5.5 applied where the mask is set, over the LDR camera image. The
-// average luminance of the masked pixels comes from the top of the mip chains of the HDR colour and of
-// the mask (mean colour / mean mask); line 6 of the algorithm samples the mask texture there, a typo
-// for the colour texture.
+// average luminance of the masked pixels comes from the top of the HDR colour's mip chain: its rgb is
+// the mean colour, its alpha (1 where an object was drawn, 0 elsewhere) the mask's coverage, so one
+// chain serves both; line 6 of the algorithm samples the mask texture there, a typo for the colour
+// texture.
 uniform sampler2D hdr;
 uniform sampler2D mask;
 uniform sampler2D background;       // the camera frame (display-referred, row 0 at the top)
@@ -21,8 +22,8 @@ void main() {
     vec3 c_w = texelFetch(hdr, pixel, 0).rgb;
     float l_w = dot(c_w, LUMA);
     float m = texelFetch(mask, pixel, 0).r;
-    float coverage = max(textureLod(mask, vec2(0.5), top_level).r, 1e-12);
-    float average = dot(textureLod(hdr, vec2(0.5), top_level).rgb, LUMA) / coverage;
+    vec4 mean = textureLod(hdr, vec2(0.5), top_level);
+    float average = dot(mean.rgb, LUMA) / max(mean.a, 1e-12);
     float l = key * l_w / average;
     float l_d = l * (1.0 + l / (white * white)) / (1.0 + l);
     // Line 9 multiplies C_w by L_d; scaling the colour to luminance L_d is what it means.
