@@ -186,6 +186,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     from arsim.capture.pipeline import CaptureSettings, burst_response, capture
     from arsim.evaluate.capture_report import filled
+    from arsim.render.content import scene_objects
     from arsim.render.session import SessionSettings, run_session
     from arsim.scenario.environment import load_environment
     from arsim.sensors.camera import SensorSettings
@@ -194,8 +195,12 @@ def cmd_render(args: argparse.Namespace) -> int:
     if not scenario.ar.enabled:
         raise ArsimError(f"{args.scenario or 'the scenario'}: [ar] enabled = false; the session needs the AR path: set it to true")
     recording_segments(scenario)
+    r = scenario.render
+    method, map_size = args.method or r.method, args.map_size or r.map_size
+    if not _is_map_size(map_size):
+        raise ArsimError(f"[render] map_size {map_size} is not a power of two from 8 up: give 64, 128, 256, ...")
     out = _output_dir(args.output)
-    probe = _probe(args.env, args.map_size) if args.env is not None else None  # read early: a bad file fails first
+    probe = _probe(args.env, map_size) if args.env is not None else None  # read early: a bad file fails first
     with progress_bar("recording the sweep and the AR path", 1.0) as update:
         record(scenario, out / "recording", progress=lambda f: update(completed=f))
     sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
@@ -203,15 +208,16 @@ def cmd_render(args: argparse.Namespace) -> int:
         with progress_bar("capturing the light probe", 1.0) as update:
             result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
         acc = result.accumulator
-        probe = to_layout(filled(acc.probe(), acc.covered()), "anglemap", args.map_size)
+        probe = to_layout(filled(acc.probe(), acc.covered()), "anglemap", map_size)
         response = result.response
     else:
         response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
-    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=args.map_size))
-    settings = SessionSettings(args.method, args.key, args.white, every=args.every)
-    with progress_bar(f"rendering the AR session ({args.method} maps)", 1.0) as update:
-        session = run_session(ar, response.linear[:, 1], probe, truth, out, settings, progress=lambda f: update(completed=f))
-    metrics = session.metrics() | {"method": args.method, "map_size": args.map_size,
+    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
+    settings = SessionSettings(method, args.key or r.key, args.white or r.white, every=args.every)
+    with progress_bar(f"rendering the AR session ({method} maps)", 1.0) as update:
+        session = run_session(ar, response.linear[:, 1], probe, truth, out, scene_objects(r), settings,
+                              progress=lambda f: update(completed=f))
+    metrics = session.metrics() | {"method": method, "map_size": map_size,
                                    "probe": str(args.env) if args.env is not None else "captured"}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: tracking p95 "
@@ -452,10 +458,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scenario .toml (default: the embedded default scenario)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--env", type=Path, metavar="PROBE.exr", help="light the objects with this environment instead of the captured probe")
-    p.add_argument("--method", choices=sorted(METHODS), default="fast", help="map method (default: fast)")
-    p.add_argument("--map-size", type=_map_size, default=128, metavar="N", help="N of the N x N maps (default: 128)")
-    p.add_argument("--key", type=_positive_float("--key"), default=0.18, help="Reinhard's key a (default: 0.18)")
-    p.add_argument("--white", type=_positive_float("--white"), default=2.0, help="Reinhard's L_white (default: 2.0)")
+    p.add_argument("--method", choices=sorted(METHODS), help="map method (default: [render] method, fast)")
+    p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
+    p.add_argument("--key", type=_positive_float("--key"), help="Reinhard's key a (default: [render] key, 0.18)")
+    p.add_argument("--white", type=_positive_float("--white"), help="Reinhard's L_white (default: [render] white, 2.0)")
     p.add_argument("--every", type=_positive_int("--every"), default=1, metavar="K",
                    help="render every K-th frame of the AR path (default: 1, all)")
     p.set_defaults(run=cmd_render)

@@ -17,8 +17,9 @@ from arsim.core.gl import create_gl_context
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.lighting.fast import fast_maps
-from arsim.render.content import SPHERE_EXPONENTS, standard_objects
+from arsim.render.content import SPHERE_EXPONENTS, scene_objects
 from arsim.render.renderer import Renderer
+from arsim.scenario.sections import RenderSection
 
 
 def main() -> None:
@@ -35,7 +36,7 @@ def main() -> None:
     ctx = create_gl_context()
     camera = CameraIntrinsics.from_fov(args.width, args.height, 60.0)
     renderer = Renderer(camera, maps, ctx)
-    for obj in standard_objects():
+    for obj in scene_objects(RenderSection()):  # the default scene
         renderer.add(obj)
     eye, target = np.array([0.05, 0.3, 0.35]), np.array([0.0, 0.02, -0.03])
     z = (target - eye) / np.linalg.norm(target - eye)

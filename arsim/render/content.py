@@ -100,19 +100,25 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
     return model
 
 
-def standard_objects(sphere_radius: float = 0.016, row_z: float = -0.14):
-    """The default scene on the tag (world metres, the tag's centre at the origin): the row of spheres
-    behind the tag, glossy, one per exponent of SPHERE_EXPONENTS, and the torus on the tag, matte with
-    its normal map and baked ambient-occlusion light map. Returns SceneObjects."""
+def scene_objects(section) -> list:
+    """The scenario's virtual objects ([[render.objects]], a RenderObjectSection each) as SceneObjects."""
     from arsim.render.meshes import uv_sphere
     from arsim.render.renderer import Material, SceneObject
 
-    spacing = 2.6 * sphere_radius
     objects = []
-    for k, exponent in enumerate(SPHERE_EXPONENTS):
-        x = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
-        objects.append(SceneObject(uv_sphere(sphere_radius, 32, 64), Material((0.15, 0.15, 0.15), (0.8, 0.8, 0.8), exponent),
-                                   translation(x, sphere_radius, row_z)))
-    objects.append(SceneObject(torus(), Material((0.7, 0.55, 0.4), (0.2, 0.2, 0.2), 80.0, bake_torus_occlusion(),
-                                                 ridges_normal_map()), translation(0.0, 0.0, 0.0)))
+    for o in section.objects:
+        x, z = o.position_m
+        if o.kind == "sphere_row":
+            spacing = 2.6 * o.size_m
+            for k, exponent in enumerate(SPHERE_EXPONENTS):
+                dx = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
+                objects.append(SceneObject(uv_sphere(o.size_m, 32, 64), Material(o.kd, o.ks, exponent),
+                                           translation(x + dx, o.size_m, z)))
+        elif o.kind == "sphere":
+            objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent), translation(x, o.size_m, z)))
+        else:
+            minor = 0.4 * o.size_m
+            objects.append(SceneObject(torus(o.size_m, minor), Material(
+                o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if o.light_map else None,
+                ridges_normal_map() if o.normal_map else None), translation(x, 0.0, z)))
     return objects

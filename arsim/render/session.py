@@ -25,8 +25,7 @@ from arsim.core.png import png_bytes
 from arsim.evaluate.recording_plots import recording_camera
 from arsim.evaluate.tracking import TrackingRun, measure_poses
 from arsim.lighting.methods import bake
-from arsim.render.content import standard_objects
-from arsim.render.renderer import Renderer
+from arsim.render.renderer import Renderer, SceneObject
 from arsim.sensors.recording import Recording
 from arsim.tracking.apriltag import TagTracker
 
@@ -84,16 +83,15 @@ def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> fl
 
 
 def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, truth: np.ndarray, out_dir: Path,
-                settings: SessionSettings = SessionSettings(),
+                objects: list[SceneObject], settings: SessionSettings = SessionSettings(),
                 progress: Callable[[float], None] = lambda fraction: None) -> SessionResult:
-    """Run the AR session over an AR recording (rec: its ar/ part) with maps from `probe` (the captured
-    angle map) and truth frames from `truth` (the true one); writes frames/*.png and session.mp4 into
-    out_dir."""
+    """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by maps
+    from `probe` (the captured angle map) and truth frames from `truth` (the true one); writes
+    frames/*.png and session.mp4 into out_dir."""
     ctx = create_gl_context()
     camera = recording_camera(rec)
     table = rec.meta["table"]
     tracker = TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
-    objects = standard_objects()
     exponents = sorted({1.0} | {o.material.exponent for o in objects})
     renderers = []
     for env in (probe, truth):

@@ -169,6 +169,40 @@ class ArSection:
                                                        help="diffuse reflectance of the table top (linear RGB)")
 
 
+MAP_METHODS = ("accurate", "bounds", "fast", "mipmap", "sh", "mc")  # arsim.lighting.methods.METHODS, by name
+
+
+@dataclass(frozen=True)
+class RenderObjectSection:
+    """[[render.objects]]: a virtual object standing on the table (the tag's centre is the origin)."""
+
+    kind: str = setting("torus", choices=("torus", "sphere", "sphere_row"),
+                        help="torus (normal map, baked AO light map), sphere, or sphere_row (exponents 1 to 1280)")
+    position_m: tuple[float, float] = setting((0.0, 0.0), min=-100.0, max=100.0, unit="m",
+                                              help="where it stands: world x and z (a row: its centre)")
+    size_m: float = setting(0.05, min=0.001, max=10.0, unit="m", help="torus: ring radius; sphere and row: sphere radius")
+    kd: tuple[float, float, float] = setting((0.7, 0.55, 0.4), min=0.0, max=1.0, help="diffuse coefficient k_d (RGB)")
+    ks: tuple[float, float, float] = setting((0.2, 0.2, 0.2), min=0.0, max=1.0, help="specular coefficient k_s (RGB)")
+    exponent: float = setting(80.0, min=1.0, max=100000.0, help="Phong exponent: the reflection map used (not for a row)")
+    normal_map: bool = setting(True, help="torus: its tangent-space ridges normal map")
+    light_map: bool = setting(True, help="torus: its baked ambient-occlusion light map")
+
+
+@dataclass(frozen=True)
+class RenderSection:
+    """[render]: the AR session's renderer: the map method, the tone mapper, the virtual objects."""
+
+    method: str = setting("fast", choices=MAP_METHODS, help="map method for the captured probe's maps")
+    map_size: int = setting(128, min=8, max=4096, help="N of the N x N irradiance and reflection maps (a power of two)")
+    key: float = setting(0.18, min=0.001, max=100.0, help="Reinhard's key a")
+    white: float = setting(2.0, min=0.001, max=1e6, help="Reinhard's L_white")
+    objects: tuple[RenderObjectSection, ...] = subsection(
+        RenderObjectSection, array=True,
+        default=(RenderObjectSection("sphere_row", (0.0, -0.14), 0.016, (0.15, 0.15, 0.15), (0.8, 0.8, 0.8)),
+                 RenderObjectSection("torus", (0.0, 0.0), 0.05)),
+        help="the virtual objects")
+
+
 @dataclass(frozen=True)
 class Scenario:
     """A whole scenario: one field per TOML section, each a checked, frozen dataclass."""
@@ -178,3 +212,4 @@ class Scenario:
     device: DeviceSection = subsection(DeviceSection, help="the phone's sensors")
     capture: CaptureSection = subsection(CaptureSection, help="the capture sweep")
     ar: ArSection = subsection(ArSection, help="the AR session's path, tag and table")
+    render: RenderSection = subsection(RenderSection, help="the AR session's renderer and virtual objects")
