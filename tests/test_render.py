@@ -67,8 +67,8 @@ def render(gl, maps, material, debug=False):
 @pytest.mark.parametrize("with_maps", [False, True])
 def test_gl_shading_equals_the_numpy_reference(gl, maps, with_maps):
     """Shaded with the vectors GL interpolated (read back from debug targets), the NumPy equations give
-    the HDR buffer within 1e-3 relative: RGBA16F rounds to 2^-11, and GL's float32 result may round to
-    the neighbouring half float, 2^-10 = 9.8e-4 of the value at most."""
+    the HDR buffer within 1e-3 relative: RGBA16F holds 2^-10 of a value at worst, and llvmpipe's
+    conversion to half floats truncates (half the pixels one step low): 9.8e-4 at most."""
     material = Material(KD, KS, 80.0, shadow() if with_maps else None, bumps() if with_maps else None)
     r = render(gl, maps, material, debug=True)
     hdr, mask = r.read_hdr(), r.read_mask() > 0.5

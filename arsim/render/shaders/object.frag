@@ -29,8 +29,9 @@ layout(location = 3) out vec4 debug_incident;
 
 // The map's value in direction d: bilinear between texel centres, in an angle-map texture whose row 0 is
 // the map's top row (t = 1) and whose texels outside the disk repeat the rim. The weights are computed
-// here in float: texture units filter with 8-bit weights (llvmpipe too), which on a sharp reflection
-// map moves a value by up to 5e-4 of itself, half of what the GL path may differ from the reference.
+// here in float: GPU texture units filter with 8-bit weights, which on a sharp reflection map would move
+// a value by a few 1e-4 of itself, against the 1e-3 the GL path is held to. (llvmpipe filters in float:
+// there, texture() gives the same HDR buffer, at about the same cost.)
 vec3 lookup(sampler2D map, vec3 d) {
     vec2 st = anglemap_st(d);
     ivec2 size = textureSize(map, 0);
