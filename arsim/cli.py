@@ -213,11 +213,12 @@ def cmd_render(args: argparse.Namespace) -> int:
     else:
         response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
-    settings = SessionSettings(method, args.key or r.key, args.white or r.white, every=args.every)
+    log_average = r.log_average if args.log_average is None else args.log_average
+    settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every)
     with progress_bar(f"rendering the AR session ({method} maps)", 1.0) as update:
         session = run_session(ar, response.linear[:, 1], probe, truth, out, scene_objects(r), settings,
                               progress=lambda f: update(completed=f))
-    metrics = session.metrics() | {"method": method, "map_size": map_size,
+    metrics = session.metrics() | {"method": method, "map_size": map_size, "log_average": log_average,
                                    "probe": str(args.env) if args.env is not None else "captured"}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: tracking p95 "
@@ -462,6 +463,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
     p.add_argument("--key", type=_positive_float("--key"), help="Reinhard's key a (default: [render] key, 0.18)")
     p.add_argument("--white", type=_positive_float("--white"), help="Reinhard's L_white (default: [render] white, 2.0)")
+    p.add_argument("--log-average", action=argparse.BooleanOptionalAction,
+                   help="tone-map with Reinhard's log-average luminance (default: [render] log_average, off: the mean)")
     p.add_argument("--every", type=_positive_int("--every"), default=1, metavar="K",
                    help="render every K-th frame of the AR path (default: 1, all)")
     p.set_defaults(run=cmd_render)

@@ -81,15 +81,18 @@ def test_gl_shading_equals_the_numpy_reference(gl, maps, with_maps):
     assert rel.max() < 1e-3
 
 
-@pytest.mark.parametrize("key, white", [(0.18, 2.0), (0.72, 0.8)])
-def test_tone_mapping_equals_the_numpy_reference_within_one_step(gl, maps, key, white):
+@pytest.mark.parametrize("key, white, log_average", [(0.18, 2.0, False), (0.72, 0.8, False), (0.18, 2.0, True)])
+def test_tone_mapping_equals_the_numpy_reference_within_one_step(gl, maps, key, white, log_average):
     r = render(gl, maps, Material(KD, KS, 80.0))
     background = np.random.default_rng(0).integers(0, 256, (CAMERA.height, CAMERA.width, 3), dtype=np.uint8)
-    out = r.tonemap(background, key, white)
+    out = r.tonemap(background, key, white, log_average)
     hdr, mask = r.read_hdr(), r.read_mask()
-    # The mip chain's top is the masked mean (the targets are padded to powers of two), up to half floats.
-    assert r.mip_average() == pytest.approx(shading.average_luminance(hdr, mask), rel=5e-3)
-    reference = shading.tonemap(hdr, mask, key, white, r.mip_average())
+    # The mip chain's top is the masked (log-)mean (the targets are padded to powers of two), up to half floats.
+    average = r.mip_average(log_average)
+    assert average == pytest.approx(shading.average_luminance(hdr, mask, log_average), rel=5e-3)
+    if log_average:  # the log-average lies below the mean (Jensen), for a scene with highlights well below
+        assert average < 0.9 * shading.average_luminance(hdr, mask)
+    reference = shading.tonemap(hdr, mask, key, white, average)
     inside = mask > 0.5
     expected = np.where(inside[..., None], np.clip(np.round(reference * 255), 0, 255), background)
     assert np.abs(out.astype(int) - expected.astype(int)).max() <= 1

@@ -34,7 +34,7 @@ end_s = 3.5
 
 def test_render_with_the_true_environment_matches_the_truth_frames(tmp_path):
     (tmp_path / "s.toml").write_text(SESSION.format(env=ENVMAPS[1].as_posix()))
-    r = arsim("render", tmp_path / "s.toml", "-o", tmp_path / "out", "--env", ENVMAPS[1], "--map-size", "64")
+    r = arsim("render", tmp_path / "s.toml", "-o", tmp_path / "out", "--env", ENVMAPS[1], "--map-size", "64", "--log-average")
     assert r.returncode == 0, r.stderr
     out = tmp_path / "out"
     m = json.loads((out / "metrics.json").read_text())

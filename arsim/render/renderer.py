@@ -62,7 +62,7 @@ class Renderer:
         # (an odd level drops a row or column); the frame occupies the lower-left corner.
         padded = tuple(1 << int(np.ceil(np.log2(k))) for k in size)
         self.hdr = self.ctx.texture(padded, 4, dtype="f2")
-        self.mask = self.ctx.texture(padded, 1, dtype="f2")
+        self.mask = self.ctx.texture(padded, 2, dtype="f2")  # the mask, and log(delta + L_w) where it is set
         attachments = [self.hdr, self.mask]
         if debug:
             self.debug_targets = [self.ctx.texture(padded, 4, dtype="f4") for _ in range(2)]
@@ -71,7 +71,7 @@ class Renderer:
         self.objects: list[tuple[SceneObject, object, object, dict]] = []
         self.output = self.ctx.texture(size, 4, dtype="f1")
         self.output_fbo = self.ctx.framebuffer([self.output])
-        self.tonemapper = None
+        self.tonemappers = {}
 
     def _map_texture(self, anglemap: np.ndarray):
         data = np.ascontiguousarray(extend_beyond_rim(anglemap).astype(np.float32))
@@ -128,25 +128,29 @@ class Renderer:
             vao.render()
         self.ctx.disable(self.ctx.DEPTH_TEST)
 
-    def _tonemapper(self):
-        if self.tonemapper is None:
-            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("tonemap.frag", []))
-            self.tonemapper = (program, self.ctx.vertex_array(program, []))
-        return self.tonemapper
+    def _tonemapper(self, log_average: bool):
+        if log_average not in self.tonemappers:
+            defines = ["LOG_AVERAGE"] if log_average else []
+            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("tonemap.frag", defines))
+            self.tonemappers[log_average] = (program, self.ctx.vertex_array(program, []))
+        return self.tonemappers[log_average]
 
     def top_level(self) -> int:
         return int(np.log2(max(self.hdr.width, self.hdr.height)))
 
-    def tonemap(self, background: np.ndarray, key: float = 0.18, white: float = 2.0) -> np.ndarray:
-        """Step 7: Reinhard's operator on the masked pixels over the camera frame (H, W, 3) uint8; the
-        8-bit result (H, W, 3), row 0 at the top."""
-        self.tonemap_pass(background, key, white)
+    def tonemap(self, background: np.ndarray, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> np.ndarray:
+        """Step 7: Reinhard's operator on the masked pixels over the camera frame (H, W, 3) uint8, with the
+        masked pixels' mean luminance or (log_average) their log-average; the 8-bit result (H, W, 3),
+        row 0 at the top."""
+        self.tonemap_pass(background, key, white, log_average)
         return self.read_output()
 
-    def tonemap_pass(self, background: np.ndarray, key: float = 0.18, white: float = 2.0) -> None:
+    def tonemap_pass(self, background: np.ndarray, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> None:
         """Step 7 into the output target, without reading it back."""
-        self.hdr.build_mipmaps()  # its alpha is the mask's coverage: the mask itself needs no chain
-        program, vao = self._tonemapper()
+        self.hdr.build_mipmaps()  # its alpha is the mask's coverage
+        if log_average:
+            self.mask.build_mipmaps()  # its second channel: log(delta + L_w) of the masked pixels
+        program, vao = self._tonemapper(log_average)
         frame = self.ctx.texture((self.camera.width, self.camera.height), 3, np.ascontiguousarray(background).tobytes())
         for unit, (name, tex) in enumerate([("hdr", self.hdr), ("mask", self.mask), ("background", frame)]):
             tex.use(unit)
@@ -174,14 +178,17 @@ class Renderer:
         return self._read(self.hdr, 4, "f2")[..., :3]
 
     def read_mask(self) -> np.ndarray:
-        return self._read(self.mask, 1, "f2")[..., 0]
+        return self._read(self.mask, 2, "f2")[..., 0]
 
     def read_debug(self) -> tuple[np.ndarray, np.ndarray]:
         """(normal (H, W, 4): the shaded normal and the light-map value in w, incident (H, W, 4))."""
         return tuple(self._read(t, 4, "f4") for t in self.debug_targets)
 
-    def mip_average(self) -> float:
-        """The average luminance of the masked pixels as the tone mapper reads it from the mip tops."""
+    def mip_average(self, log_average: bool = False) -> float:
+        """The average luminance of the masked pixels as the tone mapper reads it from the mip tops (after
+        a tonemap pass with the same log_average)."""
         top = self.top_level()
         mean = self._read(self.hdr, 4, "f2", top)[0, 0]
+        if log_average:
+            return float(np.exp(self._read(self.mask, 2, "f2", top)[0, 0, 1] / max(mean[3], 1e-12)))
         return float(mean[:3] @ TONEMAP_LUMA / max(mean[3], 1e-12))

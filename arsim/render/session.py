@@ -37,6 +37,7 @@ class SessionSettings:
     method: str = "fast"  # map method for the captured probe (and the truth frame's maps)
     key: float = 0.18  # Reinhard's a
     white: float = 2.0  # L_white
+    log_average: bool = False  # Reinhard's log-average instead of the mean luminance (thesis: the mean)
     saved_frames: Sequence[int] = ()  # frame indices written as PNG (default: four spread over the path)
     every: int = 1  # render every k-th frame of the AR path (a quick look; the video holds those frames)
 
@@ -121,7 +122,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, t
             if pose.found:  # lost frames draw no object (as the thesis's app)
                 rotation = Rotation.from_matrix(pose.rotation)
                 for name, work in (("objects", lambda: captured.render_objects(rotation, pose.translation)),
-                                   ("tone_mapping", lambda: captured.tonemap_pass(frame, settings.key, settings.white))):
+                                   ("tone_mapping", lambda: captured.tonemap_pass(frame, settings.key, settings.white, settings.log_average))):
                     ctx.finish()
                     start = time.perf_counter()
                     with query:
@@ -135,7 +136,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, t
                 step_ms["readback"].append(1000 * (time.perf_counter() - start))
                 start = time.perf_counter()
                 true_light.render_objects(rotation, pose.translation)
-                truth_frame = true_light.tonemap(frame, settings.key, settings.white)
+                truth_frame = true_light.tonemap(frame, settings.key, settings.white, settings.log_average)
                 flips[n] = masked_flip(truth_frame, out, mask) if mask.any() else np.nan
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
             video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))

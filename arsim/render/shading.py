@@ -14,6 +14,7 @@ from arsim.core.resample import sample_anglemap
 
 # Thesis Alg. 5.5 line 3: the luminance weights of the tone mapper (Rec. 601).
 TONEMAP_LUMA = np.array([0.299, 0.587, 0.114])
+LOG_DELTA = 1e-4  # Reinhard's small delta inside the log-average (log 0 on black pixels)
 
 
 def reflect(incident: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -44,12 +45,16 @@ def shade(normal: np.ndarray, incident: np.ndarray, irradiance: np.ndarray, refl
     return np.asarray(kd) * diffuse + np.asarray(ks) * specular
 
 
-def average_luminance(hdr: np.ndarray, mask: np.ndarray) -> float:
+def average_luminance(hdr: np.ndarray, mask: np.ndarray, log_average: bool = False) -> float:
     """The scene's average luminance over the masked pixels: their mean, what the top of the mip chain
-    gives (thesis 5.3.4)."""
+    gives (thesis 5.3.4), or Reinhard's log-average exp(mean(log(delta + L_w)))."""
     luminance = hdr[..., :3] @ TONEMAP_LUMA
     inside = np.asarray(mask) > 0.5
-    return float(luminance[inside].mean()) if inside.any() else 1.0
+    if not inside.any():
+        return 1.0
+    if log_average:
+        return float(np.exp(np.mean(np.log(LOG_DELTA + luminance[inside]))))
+    return float(luminance[inside].mean())
 
 
 def tonemap(hdr: np.ndarray, mask: np.ndarray, key: float, white: float, average: float) -> np.ndarray:

@@ -196,6 +196,7 @@ class RenderSection:
     map_size: int = setting(128, min=8, max=4096, help="N of the N x N irradiance and reflection maps (a power of two)")
     key: float = setting(0.18, min=0.001, max=100.0, help="Reinhard's key a")
     white: float = setting(2.0, min=0.001, max=1e6, help="Reinhard's L_white")
+    log_average: bool = setting(False, help="tone-map with Reinhard's log-average luminance instead of the mean (thesis)")
     objects: tuple[RenderObjectSection, ...] = subsection(
         RenderObjectSection, array=True,
         default=(RenderObjectSection("sphere_row", (0.0, -0.14), 0.016, (0.15, 0.15, 0.15), (0.8, 0.8, 0.8)),

@@ -1,6 +1,7 @@
 // Thesis Alg. 5.1 (image-based lighting with an irradiance and a reflection map), 5.2 (an ambient-
 // occlusion light map multiplied into the diffuse part, where LIGHT_MAP is defined) and 5.4 (a
-// tangent-space normal map, where NORMAL_MAP is defined). Writes the HDR colour and the mask; with
+// tangent-space normal map, where NORMAL_MAP is defined). Writes the HDR colour and the mask (its second
+// channel: log(delta + L_w), for the tone mapper's log-average option); with
 // DEBUG, also the vectors it shaded with, for the NumPy reference to shade the same pixels.
 uniform sampler2D irradiance_map;   // M_1, angle map extended past its rim
 uniform sampler2D reflection_map;   // M_s for this material's exponent
@@ -19,6 +20,8 @@ in vec3 v_normal;
 in vec3 v_tangent;
 in vec2 v_uv;
 in vec2 v_uv2;
+
+const float LOG_DELTA = 1e-4;       // Reinhard's delta in the log-average (render/shading.py)
 
 layout(location = 0) out vec4 hdr;
 layout(location = 1) out vec4 mask;
@@ -64,7 +67,7 @@ void main() {
     vec3 diffuse = lookup(irradiance_map, n) * light;
     vec3 specular = lookup(reflection_map, reflect(v, n));
     hdr = vec4(kd * diffuse + ks * specular, 1.0);
-    mask = vec4(1.0);
+    mask = vec4(1.0, log(LOG_DELTA + dot(hdr.rgb, vec3(0.299, 0.587, 0.114))), 0.0, 0.0);
 #ifdef DEBUG
     debug_normal = vec4(n, light.r);
     debug_incident = vec4(v, 0.0);

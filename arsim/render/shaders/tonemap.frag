@@ -2,7 +2,8 @@
 // average luminance of the masked pixels comes from the top of the HDR colour's mip chain: its rgb is
 // the mean colour, its alpha (1 where an object was drawn, 0 elsewhere) the mask's coverage, so one
 // chain serves both; line 6 of the algorithm samples the mask texture there, a typo for the colour
-// texture.
+// texture. With LOG_AVERAGE, Reinhard's log-average instead: the mask's second channel holds
+// log(delta + L_w) where an object was drawn, and its mip top over the coverage is their mean.
 uniform sampler2D hdr;
 uniform sampler2D mask;
 uniform sampler2D background;       // the camera frame (display-referred, row 0 at the top)
@@ -23,7 +24,11 @@ void main() {
     float l_w = dot(c_w, LUMA);
     float m = texelFetch(mask, pixel, 0).r;
     vec4 mean = textureLod(hdr, vec2(0.5), top_level);
+#ifdef LOG_AVERAGE
+    float average = exp(textureLod(mask, vec2(0.5), top_level).g / max(mean.a, 1e-12));
+#else
     float average = dot(mean.rgb, LUMA) / max(mean.a, 1e-12);
+#endif
     float l = key * l_w / average;
     float l_d = l * (1.0 + l / (white * white)) / (1.0 + l);
     // Line 9 multiplies C_w by L_d; scaling the colour to luminance L_d is what it means.
