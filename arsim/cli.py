@@ -275,26 +275,17 @@ def _exponents(text: str) -> list[float]:
     return values
 
 
-def _positive_float(name: str):
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} {text!r} is not a number") from None
-        if not value > 0 or not np.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{name} {value:g} is out of range: give a positive number")
-        return value
-    return parse
+def _positive(name: str, kind: type = int):
+    """An argparse type: a positive number of `kind` (int: at least 1; float: finite and above 0)."""
+    noun, allowed = ("an integer", "give at least 1") if kind is int else ("a number", "give a positive number")
 
-
-def _positive_int(name: str):
-    def parse(text: str) -> int:
+    def parse(text: str):
         try:
-            value = int(text)
+            value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} {text!r} is not an integer") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"{name} {value} is out of range: give at least 1")
+            raise argparse.ArgumentTypeError(f"{name} {text!r} is not {noun}") from None
+        if not (np.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(f"{name} {value:g} is out of range: {allowed}")
         return value
 
     return parse
@@ -406,11 +397,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="N of the N x N angle maps, a power of two from 8 (default: an angle map's own size, else 512)")
         p.add_argument("--spec", type=_exponents, default=list(DEFAULT_EXPONENTS), metavar="S,S,...",
                        help="Phong exponents; 1 is the irradiance map (default: " + ",".join(map(str, DEFAULT_EXPONENTS)) + ")")
-        p.add_argument("--sh-order", type=_positive_int("--sh-order"), default=MapParameters.sh_order, metavar="L",
+        p.add_argument("--sh-order", type=_positive("--sh-order"), default=MapParameters.sh_order, metavar="L",
                        help=f"sh: bands 0..L-1, L² coefficients (default {MapParameters.sh_order})")
         p.add_argument("--sh-faithful", action="store_true",
                        help="sh: evaluate Y_lm with factorials in double precision as the thesis's Alg. 2.5/2.6")
-        p.add_argument("--samples", type=_positive_int("--samples"), default=MapParameters.samples, metavar="K",
+        p.add_argument("--samples", type=_positive("--samples"), default=MapParameters.samples, metavar="K",
                        help=f"mc: importance samples per texel (default {MapParameters.samples})")
         p.add_argument("--seed", type=int, default=0, help="mc: random seed (default 0)")
 
@@ -426,7 +417,7 @@ def build_parser() -> argparse.ArgumentParser:
     map_options(p)
     p.add_argument("--methods", type=lambda t: [m.strip() for m in t.split(",")], default=[m for m in METHODS if m != "accurate"],
                    metavar="M,M,...", help="methods to compare (default: all but accurate, which is the reference)")
-    p.add_argument("--reference-texels", type=_positive_int("--reference-texels"), metavar="K",
+    p.add_argument("--reference-texels", type=_positive("--reference-texels"), metavar="K",
                    help="texels the accurate reference is computed at (default: all up to 128², else 2000 random)")
     p.add_argument("--sh-orders", type=lambda t: [int(o) for o in t.split(",")] if t else [],
                    default=list(DEFAULT_SH_ORDERS), metavar="O,O,...",
@@ -447,7 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a recording folder, or a scenario .toml to record first (default: the embedded default scenario)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--size", type=_map_size, metavar="N", help="N of the captured N x N angle map (default: [capture] capture_size, 512)")
-    p.add_argument("--align-every", type=_positive_int("--align-every"), metavar="K",
+    p.add_argument("--align-every", type=_positive("--align-every"), metavar="K",
                    help="align every K-th metered frame against the probe (default: [capture] align_every, 1)")
     p.set_defaults(run=cmd_capture)
 
@@ -461,11 +452,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env", type=Path, metavar="PROBE.exr", help="light the objects with this environment instead of the captured probe")
     p.add_argument("--method", choices=sorted(METHODS), help="map method (default: [render] method, fast)")
     p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
-    p.add_argument("--key", type=_positive_float("--key"), help="Reinhard's key a (default: [render] key, 0.18)")
-    p.add_argument("--white", type=_positive_float("--white"), help="Reinhard's L_white (default: [render] white, 2.0)")
+    p.add_argument("--key", type=_positive("--key", float), help="Reinhard's key a (default: [render] key, 0.18)")
+    p.add_argument("--white", type=_positive("--white", float), help="Reinhard's L_white (default: [render] white, 2.0)")
     p.add_argument("--log-average", action=argparse.BooleanOptionalAction,
                    help="tone-map with Reinhard's log-average luminance (default: [render] log_average, off: the mean)")
-    p.add_argument("--every", type=_positive_int("--every"), default=1, metavar="K",
+    p.add_argument("--every", type=_positive("--every"), default=1, metavar="K",
                    help="render every K-th frame of the AR path (default: 1, all)")
     p.set_defaults(run=cmd_render)
 

@@ -180,7 +180,7 @@ class ProbeAccumulator:
 
     def covered(self) -> np.ndarray:
         """(N, N) bool: texels with a value in every channel (measured, or a clipped lower bound)."""
-        return np.all((self.weights.sum(axis=0) > 0) | (self.bound > 0), axis=-1)
+        return np.all(self.radiance >= 0.0, axis=-1)  # merged_radiance's -1: neither
 
     def clipped_only(self) -> np.ndarray:
         """(N, N) bool: texels where some channel is only a lower bound (always seen clipped)."""

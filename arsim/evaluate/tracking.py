@@ -8,8 +8,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from arsim.capture.pipeline import read_frame
+from arsim.evaluate.capture_report import orientation_errors_deg
 from arsim.evaluate.recording_plots import frame_camera_orientations, frame_positions, recording_camera, tag_in_view
 from arsim.sensors.recording import Recording
 from arsim.tracking.apriltag import TagPose, TagTracker
@@ -51,9 +53,7 @@ def measure_poses(rec: Recording, poses: list[TagPose], frames: np.ndarray | Non
     rot, mm, pct = [], [], []
     for k, pose in enumerate(poses):
         if pose.found:
-            true_world_to_camera = views[k].inv().as_matrix()
-            cos = (np.trace(pose.rotation @ true_world_to_camera.T) - 1) / 2
-            rot.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+            rot.append(float(orientation_errors_deg(Rotation.from_matrix(pose.rotation.T), views[k])))
             error = np.linalg.norm(pose.camera_position - positions[k])
             mm.append(1000 * error)
             pct.append(100 * error / np.linalg.norm(positions[k]))

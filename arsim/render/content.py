@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from arsim.core.conventions import normalize
-from arsim.render.meshes import Mesh
+from arsim.render.meshes import Mesh, grid_mesh, uv_sphere
+from arsim.render.renderer import Material, SceneObject
 
 SPHERE_EXPONENTS = (1.0, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0)  # thesis figure 5.3
 
@@ -30,14 +31,7 @@ def torus_surface(u: np.ndarray, v: np.ndarray, major: float, minor: float) -> t
 def torus(major: float = 0.05, minor: float = 0.02, rings: int = 96, segments: int = 48) -> Mesh:
     """The torus mesh; both UV sets are (u, v) (the light map is baked in the same parameterisation)."""
     u, v = np.meshgrid(np.linspace(0.0, 1.0, rings + 1), np.linspace(0.0, 1.0, segments + 1), indexing="ij")
-    point, normal, tangent = torus_surface(u, v, major, minor)
-    uvs = np.stack([u, v], axis=-1)
-    r, s = np.meshgrid(np.arange(rings), np.arange(segments), indexing="ij")
-    a = r * (segments + 1) + s
-    b, c, d = a + segments + 1, a + 1, a + segments + 2
-    indices = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([c, b, d], -1).reshape(-1, 3)])
-    flat = (lambda x: x.reshape(-1, x.shape[-1]).astype(np.float32))
-    return Mesh(flat(point), flat(normal), flat(tangent), flat(uvs), flat(uvs), indices.astype(np.uint32))
+    return grid_mesh(*torus_surface(u, v, major, minor), np.stack([u, v], axis=-1))
 
 
 def torus_distance(p: np.ndarray, major: float, minor: float) -> np.ndarray:
@@ -55,9 +49,10 @@ def bake_torus_occlusion(major: float = 0.05, minor: float = 0.02, size: tuple[i
     v, u = np.meshgrid((h - 1 - np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
     point, normal, _ = torus_surface(u, v, major, minor)
     rng = np.random.default_rng(seed)
-    # Cosine-weighted directions around each normal (stratified in the two random numbers).
-    xi = (np.stack(np.meshgrid(np.arange(int(np.sqrt(rays))), np.arange(int(np.sqrt(rays))), indexing="ij"), -1).reshape(-1, 2)
-          + rng.random((int(np.sqrt(rays)) ** 2, 2))) / int(np.sqrt(rays))
+    # Cosine-weighted directions around each normal (stratified: a side x side grid of the two random numbers).
+    side = int(np.sqrt(rays))
+    xi = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2)
+          + rng.random((side * side, 2))) / side
     radius, angle = np.sqrt(xi[:, 0]), 2.0 * np.pi * xi[:, 1]
     local = np.stack([radius * np.cos(angle), radius * np.sin(angle), np.sqrt(1.0 - xi[:, 0])], -1)
     helper = np.where(np.abs(normal[..., 1:2]) < 0.9, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
@@ -76,8 +71,7 @@ def bake_torus_occlusion(major: float = 0.05, minor: float = 0.02, size: tuple[i
         travelled = np.where(hit, travelled, travelled + np.maximum(distance, 1e-5 * minor))
         if ((travelled > reach) | hit).all():
             break
-    visible = ~hit & (directions[..., 1] > -1.0)
-    occlusion = visible.mean(axis=0)
+    occlusion = (~hit).mean(axis=0)
     return np.repeat(occlusion[..., None], 3, axis=-1).astype(np.float32)
 
 
@@ -100,11 +94,8 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
     return model
 
 
-def scene_objects(section) -> list:
+def scene_objects(section) -> list[SceneObject]:
     """The scenario's virtual objects ([[render.objects]], a RenderObjectSection each) as SceneObjects."""
-    from arsim.render.meshes import uv_sphere
-    from arsim.render.renderer import Material, SceneObject
-
     objects = []
     for o in section.objects:
         x, z = o.position_m
