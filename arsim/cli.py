@@ -214,7 +214,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
     log_average = r.log_average if args.log_average is None else args.log_average
-    settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every)
+    overlay = r.overlay if args.overlay is None else args.overlay
+    settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay)
     with progress_bar(f"rendering the AR session ({method} maps)", 1.0) as update:
         session = run_session(ar, response.linear[:, 1], probe, truth, out, scene_objects(r), settings,
                               progress=lambda f: update(completed=f))
@@ -458,6 +459,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tone-map with Reinhard's log-average luminance (default: [render] log_average, off: the mean)")
     p.add_argument("--every", type=_positive("--every"), default=1, metavar="K",
                    help="render every K-th frame of the AR path (default: 1, all)")
+    p.add_argument("--overlay", action=argparse.BooleanOptionalAction,
+                   help="draw the overlay: frame time and map state (default: [render] overlay, off)")
     p.set_defaults(run=cmd_render)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",

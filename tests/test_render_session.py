@@ -34,17 +34,18 @@ end_s = 3.5
 
 def test_render_with_the_true_environment_matches_the_truth_frames(tmp_path):
     (tmp_path / "s.toml").write_text(SESSION.format(env=ENVMAPS[1].as_posix()))
-    r = arsim("render", tmp_path / "s.toml", "-o", tmp_path / "out", "--env", ENVMAPS[1], "--map-size", "64", "--log-average")
+    r = arsim("render", tmp_path / "s.toml", "-o", tmp_path / "out", "--env", ENVMAPS[1], "--map-size", "64", "--log-average",
+              "--overlay")
     assert r.returncode == 0, r.stderr
     out = tmp_path / "out"
     m = json.loads((out / "metrics.json").read_text())
     for key in ("tracking_rot_err_deg_p95", "tracking_trans_err_pct_p95", "frames_total", "frames_lost", "flip_mean", "step_ms"):
         assert key in m, key
     assert m["frames_total"] == 51 and 0 < m["frames_lost"] < m["frames_total"]
-    assert m["flip_mean"] == 0.0  # the same maps on both sides
+    assert m["flip_mean"] == 0.0  # the same maps on both sides (the overlay's box left out)
     lost = [k for k, f in enumerate(m["flip_per_frame"]) if f is None]
     assert len(lost) == m["frames_lost"]  # a lost frame draws no object, so nothing is compared
-    assert set(m["step_ms"]) >= {"track", "objects", "tone_mapping"}
+    assert set(m["step_ms"]) >= {"track", "background", "objects", "tone_mapping", "overlay"}
     frames = sorted((out / "frames").glob("*.png"))
     assert len(frames) == 4
     video = cv2.VideoCapture(str(out / "session.mp4"))

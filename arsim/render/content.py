@@ -104,12 +104,14 @@ def scene_objects(section) -> list[SceneObject]:
             for k, exponent in enumerate(SPHERE_EXPONENTS):
                 dx = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
                 objects.append(SceneObject(uv_sphere(o.size_m, 32, 64), Material(o.kd, o.ks, exponent),
-                                           translation(x + dx, o.size_m, z)))
+                                           translation(x + dx, o.size_m, z), (uv_sphere(o.size_m, 16, 32), uv_sphere(o.size_m, 8, 16))))
         elif o.kind == "sphere":
-            objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent), translation(x, o.size_m, z)))
+            objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent), translation(x, o.size_m, z),
+                                       (uv_sphere(o.size_m, 24, 48), uv_sphere(o.size_m, 12, 24))))
         else:
             minor = 0.4 * o.size_m
             objects.append(SceneObject(torus(o.size_m, minor), Material(
                 o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if o.light_map else None,
-                ridges_normal_map() if o.normal_map else None), translation(x, 0.0, z)))
+                ridges_normal_map() if o.normal_map else None), translation(x, 0.0, z),
+                (torus(o.size_m, minor, 48, 24), torus(o.size_m, minor, 24, 12))))
     return objects

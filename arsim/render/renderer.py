@@ -1,14 +1,23 @@
-"""The renderer's GL passes (moderngl): virtual objects into an HDR colour target and a mask (thesis
-5.1 step 4-6), then the masked tone mapping over the camera image (step 7).
+"""The renderer's GL passes (moderngl), thesis 5.1 steps 4-7: the camera frame as the background, the
+virtual objects into an HDR colour target and a mask, the masked tone mapping, and the overlay.
+
+The objects are drawn into a tile: render targets a power of two on each side, just large enough for
+the objects' rectangle on the screen (their bounding boxes, projected), with the frame's viewport shifted
+so that the rectangle's corner lands on the tile's. Clearing the tile, its mip chain and the tone
+mapping then cost what the objects cover, not what the frame does (on llvmpipe, a 1280 x 720 RGBA16F
+clear and mip chain take 5 ms; a fullscreen pass 2 ms), and the powers of two make every mip level
+halve exactly, so that the top of the chain is the mean of the tile.
 
 Images come back with row 0 at the top (OpenCV's convention); GL's framebuffer rows are bottom-up.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 
+import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -46,6 +55,61 @@ class SceneObject:
     mesh: Mesh
     material: Material
     model: np.ndarray = field(default_factory=lambda: np.eye(4))  # object to world
+    lods: tuple[Mesh, ...] = ()  # coarser meshes of the same surface, finest first, for when it is far away
+
+
+# Level of detail: the coarsest mesh whose long edges stay under this many pixels on the screen. llvmpipe
+# pays per triangle about what it pays for 30 pixels; the default torus at 0.9 m takes 8 ms with its finest
+# mesh and 4 ms with the next. A chord of 14 pixels departs from a circle of radius r pixels by 24/r
+# pixels: under a third of a pixel where the meshes switch on the default objects.
+LOD_EDGE_PX = 14.0
+
+
+@dataclass
+class _Drawable:
+    obj: SceneObject
+    program: object
+    vaos: list  # per mesh: the object's mesh, then its lods
+    edges: np.ndarray  # per mesh: its long edges' length in world units (90th percentile)
+    textures: dict
+    corners: np.ndarray  # (8, 4) the world bounding box's corners, homogeneous
+
+
+@dataclass
+class _Tile:
+    """The render targets of one tile size: HDR colour (alpha: coverage), mask (its second channel:
+    log(delta + L_w) where it is set), depth, and with debug the shading vectors."""
+
+    hdr: object
+    mask: object
+    fbo: object
+    debug: list = field(default_factory=list)
+
+
+def mesh_edges(mesh: Mesh) -> np.ndarray:
+    """The lengths of a mesh's triangle edges (each edge once per triangle)."""
+    p = mesh.positions[mesh.indices]  # (T, 3, 3)
+    return np.linalg.norm(p - np.roll(p, 1, axis=1), axis=-1).ravel()
+
+
+def overlay_image(lines: Sequence[str], frame_height: int) -> np.ndarray:
+    """The overlay's text as an RGBA image (h, w, 4) uint8, row 0 at the top: white text (OpenCV's Hershey
+    font, anti-aliased) on a black box at 55 % opacity; sized to the frame's height."""
+    scale = max(frame_height / 720.0, 0.4) * 0.6
+    thickness = max(int(round(scale * 1.6)), 1)
+    sizes = [cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness) for line in lines]
+    line_height = max((s[0][1] + s[1] for s in sizes), default=1) + 4
+    pad = line_height // 3
+    coverage = np.zeros((len(lines) * line_height + 2 * pad, max((s[0][0] for s in sizes), default=1) + 2 * pad), np.uint8)
+    for k, line in enumerate(lines):
+        baseline = pad + (k + 1) * line_height - sizes[k][1] - 2
+        cv2.putText(coverage, line, (pad, baseline), cv2.FONT_HERSHEY_SIMPLEX, scale, 255, thickness, cv2.LINE_AA)
+    alpha = np.maximum(coverage, 140)
+    return np.dstack([coverage, coverage, coverage, alpha])
+
+
+def _power_of_two(n: int, least: int = 16) -> int:
+    return max(1 << int(np.ceil(np.log2(max(n, 1)))), least)
 
 
 class Renderer:
@@ -54,24 +118,20 @@ class Renderer:
     def __init__(self, camera: CameraIntrinsics, maps: dict[float, np.ndarray], ctx=None, debug: bool = False,
                  near: float = 0.02, far: float = 50.0):
         self.ctx = ctx or create_gl_context()
-        self.camera, self.debug = camera, debug
+        self.camera, self.debug, self.near = camera, debug, near
         self.projection = gl_projection_from_intrinsics(camera, near, far)
         self.maps = {s: self._map_texture(m) for s, m in maps.items()}
-        size = (camera.width, camera.height)
-        # HDR colour and mask: a power of two on each side, so that their mip chains end in the exact mean
-        # (an odd level drops a row or column); the frame occupies the lower-left corner.
-        padded = tuple(1 << int(np.ceil(np.log2(k))) for k in size)
-        self.hdr = self.ctx.texture(padded, 4, dtype="f2")
-        self.mask = self.ctx.texture(padded, 2, dtype="f2")  # the mask, and log(delta + L_w) where it is set
-        attachments = [self.hdr, self.mask]
-        if debug:
-            self.debug_targets = [self.ctx.texture(padded, 4, dtype="f4") for _ in range(2)]
-            attachments += self.debug_targets
-        self.fbo = self.ctx.framebuffer(attachments, self.ctx.depth_renderbuffer(padded))
-        self.objects: list[tuple[SceneObject, object, object, dict]] = []
-        self.output = self.ctx.texture(size, 4, dtype="f1")
+        self.objects: list[_Drawable] = []
+        self.tiles: dict[tuple[int, int], _Tile] = {}
+        self.tile: _Tile | None = None  # the last render_objects' tile; None when nothing was in view
+        self.rect: tuple[int, int, int, int] | None = None  # its rectangle in the frame: x, y (GL, from the bottom), w, h
+        # The output: the camera frame written in (step 4), the tone-mapped objects drawn over it (step 6).
+        # (RGBA: llvmpipe writes and draws into 3-byte pixels through a slow path, 2-3 times the time)
+        self.output = self.ctx.texture((camera.width, camera.height), 4, dtype="f1")
         self.output_fbo = self.ctx.framebuffer([self.output])
         self.tonemappers = {}
+        self.overlay_program = None
+        self.overlay_box = None  # the overlay's pixels (a slice of the image) after overlay_pass
 
     def _map_texture(self, anglemap: np.ndarray):
         data = np.ascontiguousarray(extend_beyond_rim(anglemap).astype(np.float32))
@@ -92,41 +152,83 @@ class Renderer:
             raise ValueError(f"no reflection map for exponent {m.exponent:g}; maps for: {sorted(self.maps)}")
         defines = (["LIGHT_MAP"] if m.light_map is not None else []) + (["NORMAL_MAP"] if m.normal_map is not None else [])
         defines += ["DEBUG"] if self.debug else []
+        defines += ["FLOAT_FILTERING"] if "llvmpipe" in self.ctx.info["GL_RENDERER"] else []
         program = self.ctx.program(vertex_shader=_source("object.vert", defines), fragment_shader=_source("object.frag", defines))
-        vbo = self.ctx.buffer(obj.mesh.interleaved().tobytes())
-        ibo = self.ctx.buffer(obj.mesh.indices.astype(np.uint32).tobytes())
         sizes = {"in_position": 3, "in_normal": 3, "in_tangent": 3, "in_uv": 2, "in_uv2": 2}
         used = [n for n in sizes if n in program]  # the compiler drops what a variant does not read
         layout = " ".join(f"{k}f" if n in used else f"{k}x4" for n, k in sizes.items())
-        vao = self.ctx.vertex_array(program, [(vbo, layout, *used)], ibo)
+        meshes = (obj.mesh, *obj.lods)
+        vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.interleaved().tobytes()), layout, *used)],
+                                      self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes())) for mesh in meshes]
+        scale = np.abs(np.linalg.eigvalsh(obj.model[:3, :3].T @ obj.model[:3, :3])).max() ** 0.5
+        edges = np.array([np.percentile(mesh_edges(mesh), 90) * scale for mesh in meshes])
         textures = {"light_map": self._image_texture(m.light_map) if m.light_map is not None else None,
                     "normal_map": self._image_texture(m.normal_map) if m.normal_map is not None else None}
-        self.objects.append((obj, program, vao, textures))
+        low, high = obj.mesh.positions.min(axis=0), obj.mesh.positions.max(axis=0)
+        corners = np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
+        self.objects.append(_Drawable(obj, program, vaos, edges, textures, corners @ obj.model.T))
+
+    def screen_rect(self, view_projection: np.ndarray) -> tuple[int, int, int, int] | None:
+        """The frame's rectangle (x, y from the bottom, w, h) that holds every object: their bounding
+        boxes projected, a pixel around; the whole frame when a box reaches behind the near plane; None
+        when no object can be in view."""
+        width, height = self.camera.width, self.camera.height
+        clip = np.concatenate([d.corners for d in self.objects]) @ view_projection.T
+        if (clip[:, 3] < self.near).any():
+            return (0, 0, width, height) if (clip[:, 3] > 0).any() else None
+        ndc = clip[:, :2] / clip[:, 3:]
+        pixels = (ndc * 0.5 + 0.5) * [width, height]
+        x0, y0 = np.maximum(np.floor(pixels.min(axis=0)).astype(int) - 1, 0)
+        x1, y1 = np.minimum(np.ceil(pixels.max(axis=0)).astype(int) + 1, [width, height])
+        return (int(x0), int(y0), int(x1 - x0), int(y1 - y0)) if x1 > x0 and y1 > y0 else None
+
+    def _tile(self, width: int, height: int) -> _Tile:
+        size = (min(_power_of_two(width), _power_of_two(self.camera.width)),
+                min(_power_of_two(height), _power_of_two(self.camera.height)))
+        if size not in self.tiles:
+            hdr, mask = self.ctx.texture(size, 4, dtype="f2"), self.ctx.texture(size, 2, dtype="f2")
+            debug = [self.ctx.texture(size, 4, dtype="f4") for _ in range(2)] if self.debug else []
+            fbo = self.ctx.framebuffer([hdr, mask, *debug], self.ctx.depth_renderbuffer(size))
+            self.tiles[size] = _Tile(hdr, mask, fbo, debug)
+        return self.tiles[size]
+
+    def no_objects(self) -> None:
+        """A frame without objects (the tag lost): the tone mapping leaves the camera frame as it is."""
+        self.rect = self.tile = None
 
     def render_objects(self, rotation: Rotation, translation: np.ndarray) -> None:
-        """Steps 4-6: the objects into the HDR colour and the mask, seen from the OpenCV world-to-camera
+        """Step 5: the objects into the HDR colour and the mask, seen from the OpenCV world-to-camera
         pose (x_cam = R x_world + t)."""
         view = gl_view_from_opencv_pose(rotation, translation)
+        view_projection = self.projection @ view
         eye = -rotation.as_matrix().T @ np.asarray(translation, dtype=np.float64)
-        self.fbo.use()
-        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        self.fbo.viewport = (0, 0, self.camera.width, self.camera.height)
-        self.ctx.enable(self.ctx.DEPTH_TEST)
-        for obj, program, vao, textures in self.objects:
+        self.rect = self.screen_rect(view_projection) if self.objects else None
+        if self.rect is None:
+            return self.no_objects()
+        x, y, w, h = self.rect
+        self.tile = self._tile(w, h)
+        self.tile.fbo.use()
+        self.tile.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        self.tile.fbo.viewport = (-x, -y, self.camera.width, self.camera.height)  # the rectangle's corner at the tile's
+        self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)  # closed meshes: their back faces are hidden
+        for d in self.objects:
+            obj, program = d.obj, d.program
             normal_matrix = np.linalg.inv(obj.model[:3, :3]).T
             program["model"].write(obj.model.T.astype("f4").tobytes())
-            program["view_projection"].write((self.projection @ view).T.astype("f4").tobytes())
+            program["view_projection"].write(view_projection.T.astype("f4").tobytes())
             program["normal_matrix"].write(normal_matrix.T.astype("f4").tobytes())
             program["kd"].value = tuple(obj.material.kd)
             program["ks"].value = tuple(obj.material.ks)
             program["eye"].value = tuple(eye)
             units = [("irradiance_map", self.maps[1.0]), ("reflection_map", self.maps[obj.material.exponent])]
-            units += [(name, tex) for name, tex in textures.items() if tex is not None]
+            units += [(name, tex) for name, tex in d.textures.items() if tex is not None]
             for unit, (name, tex) in enumerate(units):
                 tex.use(unit)
                 program[name].value = unit
-            vao.render()
-        self.ctx.disable(self.ctx.DEPTH_TEST)
+            depth = max((d.corners @ view_projection.T)[:, 3].min(), self.near)  # its nearest point's distance
+            on_screen = d.edges * self.camera.fx / depth
+            d.vaos[max([k for k, px in enumerate(on_screen) if px <= LOD_EDGE_PX], default=0)].render()
+        self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
 
     def _tonemapper(self, log_average: bool):
         if log_average not in self.tonemappers:
@@ -136,59 +238,104 @@ class Renderer:
         return self.tonemappers[log_average]
 
     def top_level(self) -> int:
-        return int(np.log2(max(self.hdr.width, self.hdr.height)))
+        return int(np.log2(max(self.tile.hdr.width, self.tile.hdr.height)))
 
     def tonemap(self, background: np.ndarray, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> np.ndarray:
-        """Step 7: Reinhard's operator on the masked pixels over the camera frame (H, W, 3) uint8, with the
-        masked pixels' mean luminance or (log_average) their log-average; the 8-bit result (H, W, 3),
-        row 0 at the top."""
-        self.tonemap_pass(background, key, white, log_average)
+        """Steps 4 and 6: the camera frame (H, W, 3) uint8 with Reinhard's operator on the masked pixels
+        over it, with the masked pixels' mean luminance or (log_average) their log-average; the 8-bit
+        result (H, W, 3), row 0 at the top."""
+        self.background_pass(background)
+        self.tonemap_pass(key, white, log_average)
         return self.read_output()
 
-    def tonemap_pass(self, background: np.ndarray, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> None:
-        """Step 7 into the output target, without reading it back."""
-        self.hdr.build_mipmaps()  # its alpha is the mask's coverage
+    def background_pass(self, background: np.ndarray) -> None:
+        """Step 4: the camera frame (H, W, 3) uint8, row 0 at the top, into the output."""
+        self.output.write(cv2.cvtColor(cv2.flip(background, 0), cv2.COLOR_RGB2RGBA))  # GL's rows are bottom-up
+
+    def tonemap_pass(self, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> None:
+        """Step 6: the tone-mapped objects over the output's background, without reading it back."""
+        if self.tile is None:
+            return
+        self.tile.hdr.build_mipmaps()  # its alpha is the mask's coverage
         if log_average:
-            self.mask.build_mipmaps()  # its second channel: log(delta + L_w) of the masked pixels
+            self.tile.mask.build_mipmaps()  # its second channel: log(delta + L_w) of the masked pixels
         program, vao = self._tonemapper(log_average)
-        frame = self.ctx.texture((self.camera.width, self.camera.height), 3, np.ascontiguousarray(background).tobytes())
-        for unit, (name, tex) in enumerate([("hdr", self.hdr), ("mask", self.mask), ("background", frame)]):
-            tex.use(unit)
-            program[name].value = unit
+        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("mask", self.tile.mask)]):
+            if name in program:  # the mask's log channel: only the log-average reads it
+                tex.use(unit)
+                program[name].value = unit
         program["key"].value, program["white"].value = key, white
-        program["top_level"].value = float(self.top_level())
+        program["top_level"].value = self.top_level()
+        program["origin"].value = self.rect[:2]
         self.output_fbo.use()
+        self.output_fbo.viewport = self.rect  # only the objects' rectangle
         vao.render(vertices=3)
-        frame.release()
+        self.output_fbo.viewport = (0, 0, self.camera.width, self.camera.height)
+
+    def overlay_pass(self, lines: Sequence[str]) -> None:
+        """Step 7: the user interface, lines of text (frame time, bake progress) in a translucent box at
+        the frame's top left, blended over the output."""
+        image = overlay_image(lines, self.camera.height)
+        h, w = image.shape[:2]
+        if self.overlay_program is None:
+            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("overlay.frag", []))
+            self.overlay_program = (program, self.ctx.vertex_array(program, []), {})
+        program, vao, textures = self.overlay_program
+        if (w, h) not in textures:
+            textures[(w, h)] = self.ctx.texture((w, h), 4, dtype="f1")
+            textures[(w, h)].filter = self.ctx.NEAREST, self.ctx.NEAREST
+        texture = textures[(w, h)]
+        texture.write(np.ascontiguousarray(image[::-1]))
+        texture.use(0)
+        program["text"].value = 0
+        margin = max(self.camera.height // 90, 2)
+        self.overlay_box = np.s_[margin:margin + h, margin:margin + w]  # in the image, row 0 at the top
+        self.output_fbo.use()
+        self.output_fbo.viewport = (margin, max(self.camera.height - margin - h, 0), w, h)
+        self.ctx.enable(self.ctx.BLEND)
+        self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
+        vao.render(vertices=3)
+        self.ctx.disable(self.ctx.BLEND)
+        self.output_fbo.viewport = (0, 0, self.camera.width, self.camera.height)
 
     def _read(self, texture, components: int, dtype: str, level: int = 0) -> np.ndarray:
-        """A texture level as an image, row 0 at the top; level 0 cropped to the frame."""
+        """A tile texture's level as an image; level 0 placed into the frame (zeros around the objects'
+        rectangle), row 0 at the top."""
         w, h = max(texture.width >> level, 1), max(texture.height >> level, 1)
-        np_dtype = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}[dtype]
-        data = np.frombuffer(texture.read(level=level), dtype=np_dtype).reshape(h, w, components)
+        np_dtype = {"f2": np.float16, "f4": np.float32}[dtype]
+        data = np.frombuffer(texture.read(level=level), dtype=np_dtype).reshape(h, w, components).astype(np.float32)
         if level == 0:
-            data = data[:self.camera.height, :self.camera.width]
-        return data[::-1].astype(np.float32 if dtype != "f1" else np.uint8)
+            x, y, rw, rh = self.rect
+            frame = np.zeros((self.camera.height, self.camera.width, components), np.float32)
+            frame[y:y + rh, x:x + rw] = data[:rh, :rw]
+            data = frame
+        return data[::-1]
+
+    def _read_tile(self, name: str, components: int, dtype: str) -> np.ndarray:
+        if self.tile is None:  # nothing in view: nothing drawn
+            return np.zeros((self.camera.height, self.camera.width, components), np.float32)
+        return self._read(getattr(self.tile, name), components, dtype)
 
     def read_output(self) -> np.ndarray:
-        """The tone-mapped frame (H, W, 3) uint8 of the last tonemap_pass."""
-        return self._read(self.output, 4, "f1")[..., :3]
+        """The frame (H, W, 3) uint8 after the last passes."""
+        data = np.frombuffer(self.output.read(), dtype=np.uint8).reshape(self.camera.height, self.camera.width, 4)
+        return data[::-1, :, :3]
 
     def read_hdr(self) -> np.ndarray:
-        return self._read(self.hdr, 4, "f2")[..., :3]
+        return self._read_tile("hdr", 4, "f2")[..., :3]
 
     def read_mask(self) -> np.ndarray:
-        return self._read(self.mask, 2, "f2")[..., 0]
+        return self._read_tile("mask", 2, "f2")[..., 0]
 
     def read_debug(self) -> tuple[np.ndarray, np.ndarray]:
         """(normal (H, W, 4): the shaded normal and the light-map value in w, incident (H, W, 4))."""
-        return tuple(self._read(t, 4, "f4") for t in self.debug_targets)
+        return tuple(self._read(t, 4, "f4") for t in self.tile.debug)
 
     def mip_average(self, log_average: bool = False) -> float:
         """The average luminance of the masked pixels as the tone mapper reads it from the mip tops (after
         a tonemap pass with the same log_average)."""
         top = self.top_level()
-        mean = self._read(self.hdr, 4, "f2", top)[0, 0]
+        mean = self._read(self.tile.hdr, 4, "f2", top)[0, 0]
         if log_average:
-            return float(np.exp(self._read(self.mask, 2, "f2", top)[0, 0, 1] / max(mean[3], 1e-12)))
+            return float(np.exp(self._read(self.tile.mask, 2, "f2", top)[0, 0, 1] / max(mean[3], 1e-12)))
         return float(mean[:3] @ TONEMAP_LUMA / max(mean[3], 1e-12))

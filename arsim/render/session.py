@@ -1,10 +1,10 @@
-"""The AR session (thesis 5.1): per frame, the tag's pose from the tracker, the virtual objects drawn
-into the HDR colour and the mask with the maps from the captured probe, and the masked tone mapping
-over the camera frame; beside it the truth frame, the same objects lit by maps from the true
-environment, and the FLIP difference between the two inside the mask. Each step is timed on the CPU
-and, for the GL passes, with timer queries.
+"""The AR session (thesis 5.1): per frame, the tag's pose from the tracker (steps 1-2), the camera
+frame as the background (4), the virtual objects drawn into the HDR colour and the mask with the maps
+from the captured probe (5), the masked tone mapping (6) and the overlay (7); beside it the truth
+frame, the same objects lit by maps from the true environment, and the FLIP difference between the two
+inside the mask. Each step is timed on the CPU and, for the GL passes, with timer queries.
 
-Map baking inside the frame loop (step 3) and the overlay (step 7's UI) are not part of this loop yet.
+Map baking inside the frame loop (step 3) is not part of this loop yet.
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ from arsim.render.renderer import Renderer, SceneObject
 from arsim.sensors.recording import Recording
 from arsim.tracking.apriltag import TagTracker
 
-STEPS = ("track", "objects", "tone_mapping", "truth_frame", "readback")
+STEPS = ("track", "background", "objects", "tone_mapping", "overlay", "readback", "truth_frame")
+GL_STEPS = ("background", "objects", "tone_mapping", "overlay")
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,7 @@ class SessionSettings:
     log_average: bool = False  # Reinhard's log-average instead of the mean luminance (thesis: the mean)
     saved_frames: Sequence[int] = ()  # frame indices written as PNG (default: four spread over the path)
     every: int = 1  # render every k-th frame of the AR path (a quick look; the video holds those frames)
+    overlay: bool = False  # step 7: frame time and map state drawn at the top left (left out of the FLIP)
 
 
 @dataclass
@@ -106,10 +108,21 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, t
     saved = set(settings.saved_frames or indices[np.linspace(0, count - 1, 4).round().astype(int)].tolist())
     (out_dir / "frames").mkdir(parents=True, exist_ok=True)
     step_ms = {name: [] for name in STEPS}
-    gl_ms = {"objects": [], "tone_mapping": []}
+    gl_ms = {name: [] for name in GL_STEPS}
     query = ctx.query(time=True)
     poses, flips = [], np.full(count, np.nan)
     fps = rec.meta["camera"].get("fps", 30.0) / settings.every
+    last_frame_ms = 0.0
+
+    def timed(name: str, work: Callable[[], None]) -> None:
+        ctx.finish()
+        start = time.perf_counter()
+        with query:
+            work()
+        ctx.finish()
+        step_ms[name].append(1000 * (time.perf_counter() - start))
+        gl_ms[name].append(query.elapsed / 1e6)
+
     with atomic_path(out_dir / "session.mp4") as video_path:
         video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
         for n, k in enumerate(indices):
@@ -118,25 +131,33 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, t
             pose = tracker.track(frame)
             step_ms["track"].append(1000 * (time.perf_counter() - start))
             poses.append(pose)
-            out = frame
+            rotation = Rotation.from_matrix(pose.rotation) if pose.found else None
+            timed("background", lambda: captured.background_pass(frame))
             if pose.found:  # lost frames draw no object (as the thesis's app)
-                rotation = Rotation.from_matrix(pose.rotation)
-                for name, work in (("objects", lambda: captured.render_objects(rotation, pose.translation)),
-                                   ("tone_mapping", lambda: captured.tonemap_pass(frame, settings.key, settings.white, settings.log_average))):
-                    ctx.finish()
-                    start = time.perf_counter()
-                    with query:
-                        work()
-                    ctx.finish()
-                    step_ms[name].append(1000 * (time.perf_counter() - start))
-                    gl_ms[name].append(query.elapsed / 1e6)
-                start = time.perf_counter()
-                out = captured.read_output()
-                mask = captured.read_mask() > 0.5
-                step_ms["readback"].append(1000 * (time.perf_counter() - start))
+                timed("objects", lambda: captured.render_objects(rotation, pose.translation))
+                timed("tone_mapping", lambda: captured.tonemap_pass(settings.key, settings.white, settings.log_average))
+            else:
+                captured.no_objects()
+            overlay_box = None
+            if settings.overlay:
+                lines = [f"frame {k}  {last_frame_ms:5.1f} ms", f"maps: {settings.method}" if pose.found else "tag lost"]
+                timed("overlay", lambda: captured.overlay_pass(lines))
+                overlay_box = captured.overlay_box
+            last_frame_ms = sum(step_ms[name][-1] for name in ("track", *GL_STEPS) if step_ms[name]
+                                and (name in ("track", "background", "overlay") or pose.found))
+            start = time.perf_counter()
+            out = captured.read_output()
+            mask = captured.read_mask() > 0.5
+            step_ms["readback"].append(1000 * (time.perf_counter() - start))
+            if pose.found:
                 start = time.perf_counter()
                 true_light.render_objects(rotation, pose.translation)
-                truth_frame = true_light.tonemap(frame, settings.key, settings.white, settings.log_average)
+                true_light.background_pass(frame)
+                true_light.tonemap_pass(settings.key, settings.white, settings.log_average)
+                if overlay_box is not None:  # the same overlay on both (FLIP's filters reach past its box), and
+                    true_light.overlay_pass(lines)  # its pixels left out: they are not the objects' light
+                    mask[overlay_box] = False
+                truth_frame = true_light.read_output()
                 flips[n] = masked_flip(truth_frame, out, mask) if mask.any() else np.nan
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
             video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))

@@ -197,6 +197,7 @@ class RenderSection:
     key: float = setting(0.18, min=0.001, max=100.0, help="Reinhard's key a")
     white: float = setting(2.0, min=0.001, max=1e6, help="Reinhard's L_white")
     log_average: bool = setting(False, help="tone-map with Reinhard's log-average luminance instead of the mean (thesis)")
+    overlay: bool = setting(False, help="draw the overlay (frame time, map state) at the frames' top left")
     objects: tuple[RenderObjectSection, ...] = subsection(
         RenderObjectSection, array=True,
         default=(RenderObjectSection("sphere_row", (0.0, -0.14), 0.016, (0.15, 0.15, 0.15), (0.8, 0.8, 0.8)),
