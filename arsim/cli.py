@@ -186,8 +186,9 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     from arsim.capture.pipeline import CaptureSettings, burst_response, capture
     from arsim.evaluate.capture_report import filled
+    from arsim.lighting.bake_output import read_bake
     from arsim.render.content import scene_objects
-    from arsim.render.session import SessionSettings, run_session
+    from arsim.render.session import SessionSettings, check_maps, maps_needed, run_session, session_maps
     from arsim.scenario.environment import load_environment
     from arsim.sensors.camera import SensorSettings
 
@@ -199,12 +200,27 @@ def cmd_render(args: argparse.Namespace) -> int:
     method, map_size = args.method or r.method, args.map_size or r.map_size
     if not _is_map_size(map_size):
         raise ArsimError(f"[render] map_size {map_size} is not a power of two from 8 up: give 64, 128, 256, ...")
+    if args.env is not None and args.maps:
+        raise ArsimError("--env and --maps both give the light: pass one of them")
+    objects = scene_objects(r)  # a mesh that cannot be read fails here, before any work
+    needed = maps_needed(objects, method)
+    maps = None
+    if args.maps:  # maps baked before (`arsim bake`), one folder per method
+        maps = {}
+        for folder in args.maps:
+            name, baked = read_bake(folder)
+            maps.setdefault(name, {}).update(baked)
+        check_maps(maps, needed)
+        sizes = {m.shape[0] for ms in maps.values() for m in ms.values()}
+        if len(sizes) > 1:
+            raise ArsimError(f"the --maps folders hold maps of sizes {sorted(sizes)}; give maps of one size")
+        map_size = sizes.pop()
     out = _output_dir(args.output)
     probe = _probe(args.env, map_size) if args.env is not None else None  # read early: a bad file fails first
     with progress_bar("recording the sweep and the AR path", 1.0) as update:
         record(scenario, out / "recording", progress=lambda f: update(completed=f))
     sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
-    if probe is None:
+    if probe is None and maps is None:
         with progress_bar("capturing the light probe", 1.0) as update:
             result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
         acc = result.accumulator
@@ -213,14 +229,18 @@ def cmd_render(args: argparse.Namespace) -> int:
     else:
         response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
+    with progress_bar(f"computing the maps ({', '.join(needed)})", 1.0) as update:
+        maps = maps if maps is not None else session_maps(probe, needed)
+        truth_maps = session_maps(truth, needed)
     log_average = r.log_average if args.log_average is None else args.log_average
     overlay = r.overlay if args.overlay is None else args.overlay
     settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay)
-    with progress_bar(f"rendering the AR session ({method} maps)", 1.0) as update:
-        session = run_session(ar, response.linear[:, 1], probe, truth, out, scene_objects(r), settings,
+    with progress_bar(f"rendering the AR session ({', '.join(needed)} maps)", 1.0) as update:
+        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, objects, settings,
                               progress=lambda f: update(completed=f))
-    metrics = session.metrics() | {"method": method, "map_size": map_size, "log_average": log_average,
-                                   "probe": str(args.env) if args.env is not None else "captured"}
+    source = str(args.env) if args.env is not None else ", ".join(map(str, args.maps)) if args.maps else "captured"
+    metrics = session.metrics() | {"method": method, "methods": needed, "map_size": map_size, "log_average": log_average,
+                                   "probe": source}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: tracking p95 "
           f"{metrics['tracking_rot_err_deg_p95']:.2f} degrees, {metrics['tracking_trans_err_pct_p95']:.2f} % of the distance; "
@@ -451,7 +471,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scenario .toml (default: the embedded default scenario)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--env", type=Path, metavar="PROBE.exr", help="light the objects with this environment instead of the captured probe")
-    p.add_argument("--method", choices=sorted(METHODS), help="map method (default: [render] method, fast)")
+    p.add_argument("--maps", type=Path, nargs="+", metavar="DIR",
+                   help="light the objects with maps baked before (`arsim bake` folders, one per method) instead of the captured probe")
+    p.add_argument("--method", choices=sorted(METHODS),
+                   help="map method of the objects that name none (default: [render] method, fast)")
     p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
     p.add_argument("--key", type=_positive("--key", float), help="Reinhard's key a (default: [render] key, 0.18)")
     p.add_argument("--white", type=_positive("--white", float), help="Reinhard's L_white (default: [render] white, 2.0)")

@@ -20,7 +20,7 @@ from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
 from arsim.core.resample import to_layout
 from arsim.evaluate.capture_report import filled
 from arsim.render.content import scene_objects
-from arsim.render.session import SessionSettings, run_session
+from arsim.render.session import SessionSettings, maps_needed, run_session, session_maps
 from arsim.scenario.environment import load_environment
 from arsim.sensors.recording import load_recording
 
@@ -42,9 +42,11 @@ def main() -> None:
     print("|---|---|---|---|")
     for method in args.methods.split(","):
         start = time.perf_counter()
+        objects = scene_objects(scenario.render)
+        needed = maps_needed(objects, method)
         with tempfile.TemporaryDirectory() as tmp:
-            session = run_session(ar, result.response.linear[:, 1], probe, truth, Path(tmp), scene_objects(scenario.render),
-                                  SessionSettings(method, every=args.every))
+            session = run_session(ar, result.response.linear[:, 1], session_maps(probe, needed), session_maps(truth, needed),
+                                  Path(tmp), objects, SessionSettings(method, every=args.every))
         flip = session.flip[np.isfinite(session.flip)]
         print(f"| {method} | {flip.mean():.4f} | {flip.max():.4f} | {time.perf_counter() - start:.0f} |")
 

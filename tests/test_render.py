@@ -140,3 +140,68 @@ def test_the_torus_occlusion_is_open_on_top_and_closed_where_it_touches_the_tabl
     assert ao[row(0.75)].max() < 0.05  # its underside rests on the table
     # the inner equator faces the hole (the ring opposite, the table): darker than the outer one
     assert ao[row(0.5)].mean() < ao[row(0.01)].mean() - 0.1
+
+
+def test_vertex_tangents_follow_increasing_u():
+    """Tangents from the UVs (Lengyel) equal the parametric surfaces' own: east on a sphere (away from
+    its poles, where longitudes meet), along the ring on the torus; on the seam, where a vertex has
+    triangles on one side only, within half a segment's turn."""
+    from arsim.render.content import torus
+    from arsim.render.meshes import vertex_tangents
+
+    for mesh in (uv_sphere(1.0, 24, 48), torus(0.05, 0.02, 48, 24)):
+        computed = vertex_tangents(mesh.positions, mesh.normals, mesh.uvs, mesh.indices)
+        inner = np.abs(mesh.normals[:, 1]) < 0.95
+        seam = (mesh.uvs[:, 0] == 0.0) | (mesh.uvs[:, 0] == 1.0)
+        cos = np.sum(computed * mesh.tangents, axis=1)
+        assert cos[inner & ~seam].min() > 0.9999
+        assert cos[inner & seam].min() > np.cos(np.pi / 48)  # both meshes: 48 segments around
+        assert np.abs(np.sum(computed * mesh.normals, axis=1)).max() < 1e-5  # orthogonal to the normal
+
+
+def test_a_mesh_file_renders_like_the_mesh_it_holds(gl, maps, tmp_path):
+    """A torus written to OBJ with its UVs and read back: same triangles, UVs kept, and the same pixels."""
+    import trimesh
+
+    from arsim.render.content import torus
+    from arsim.render.meshes import load_mesh
+
+    mesh = torus(0.1, 0.04, 48, 24)
+    visual = trimesh.visual.TextureVisuals(uv=mesh.uvs)
+    trimesh.Trimesh(mesh.positions, mesh.indices, vertex_normals=mesh.normals, visual=visual, process=False).export(
+        tmp_path / "t.obj", include_normals=True)
+    loaded, textured = load_mesh(tmp_path / "t.obj")
+    assert textured and len(loaded.indices) == len(mesh.indices)
+    material = Material(KD, KS, 80.0, normal_map=bumps())
+    images = []
+    for m in (mesh, loaded):
+        r = Renderer(CAMERA, maps, gl)
+        r.add(SceneObject(m, material))
+        r.render_objects(*look_at(np.array([0.05, 0.35, 0.3]), [0.0, 0.03, 0.0]))
+        images.append((r.read_hdr(), r.read_mask() > 0.5))
+    (a, mask_a), (b, mask_b) = images
+    assert mask_a.mean() > 0.05 and (mask_a == mask_b).mean() > 0.999  # (the OBJ's 6-digit vertices: edge pixels)
+    both = mask_a & mask_b
+    assert np.median(np.abs(a[both] - b[both]) / np.maximum(b[both], 1e-3)) < 1e-3
+
+
+def test_each_material_takes_its_own_methods_maps(gl, maps):
+    """Two methods' maps in one renderer: a material naming one is lit by it; a method without the
+    material's exponent is refused."""
+    from arsim.core.errors import ArsimError
+
+    dim = {s: m * 0.5 for s, m in maps.items()}  # a second 'method' whose maps are half as bright
+    view = look_at(np.array([0.05, 0.35, 0.3]), [0.0, 0.1, 0.0])
+    model = np.eye(4)
+    model[:3, 3] = [0.0, 0.1, 0.0]
+    images = {}
+    for method in ("fast", "mipmap"):
+        r = Renderer(CAMERA, {"fast": maps, "mipmap": dim}, gl, method="fast")
+        r.add(SceneObject(uv_sphere(0.1), Material(KD, KS, 80.0, method=method), model))
+        r.render_objects(*view)
+        images[method] = r.read_hdr()
+    inside = r.read_mask() > 0.5
+    np.testing.assert_allclose(images["mipmap"][inside], 0.5 * images["fast"][inside], rtol=2e-3)
+    r = Renderer(CAMERA, {"fast": maps, "mipmap": {1.0: dim[1.0]}}, gl)
+    with pytest.raises(ArsimError, match="no mipmap maps for exponent 80"):
+        r.add(SceneObject(uv_sphere(0.1), Material(KD, KS, 80.0, method="mipmap"), model))

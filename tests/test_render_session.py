@@ -6,6 +6,7 @@ import json
 
 import cv2
 import numpy as np
+import trimesh
 
 from tests.conftest import ENVMAPS
 from tests.test_cli import arsim, assert_one_line_error
@@ -29,11 +30,20 @@ far_m = 0.6
 [[ar.look_away]]
 start_s = 2.0
 end_s = 3.5
+[[render.objects]]
+kind = "torus"
+[[render.objects]]
+kind = "mesh"
+mesh = "cube.obj"
+position_m = [0.12, 0.0]
+size_m = 0.05
+method = "mipmap"
 """
 
 
 def test_render_with_the_true_environment_matches_the_truth_frames(tmp_path):
     (tmp_path / "s.toml").write_text(SESSION.format(env=ENVMAPS[1].as_posix()))
+    trimesh.creation.box().export(tmp_path / "cube.obj")  # a mesh file, lit by another method's maps
     r = arsim("render", tmp_path / "s.toml", "-o", tmp_path / "out", "--env", ENVMAPS[1], "--map-size", "64", "--log-average",
               "--overlay")
     assert r.returncode == 0, r.stderr
@@ -46,6 +56,7 @@ def test_render_with_the_true_environment_matches_the_truth_frames(tmp_path):
     lost = [k for k, f in enumerate(m["flip_per_frame"]) if f is None]
     assert len(lost) == m["frames_lost"]  # a lost frame draws no object, so nothing is compared
     assert set(m["step_ms"]) >= {"track", "background", "objects", "tone_mapping", "overlay"}
+    assert m["methods"] == {"fast": [1.0, 80.0], "mipmap": [1.0, 80.0]}
     frames = sorted((out / "frames").glob("*.png"))
     assert len(frames) == 4
     video = cv2.VideoCapture(str(out / "session.mp4"))
@@ -67,4 +78,18 @@ def test_render_refuses_bad_input_in_one_line(tmp_path):
     assert_one_line_error(arsim("render", tmp_path / "exponent.toml", "-o", tmp_path / "out"), "exponent")
     (tmp_path / "size.toml").write_text("[render]\nmap_size = 100\n")
     assert_one_line_error(arsim("render", tmp_path / "size.toml", "-o", tmp_path / "out"), "map_size")
+    # a mesh file that cannot be read, one that is not there, and a mesh object without its file
+    (tmp_path / "broken.ply").write_bytes(b"\x00\x01 not a mesh")
+    for mesh, fragment in (("broken.ply", "cannot read the mesh"), ("missing.obj", "no such file")):
+        (tmp_path / "mesh.toml").write_text(f'[[render.objects]]\nkind = "mesh"\nmesh = "{mesh}"\n')
+        assert_one_line_error(arsim("render", tmp_path / "mesh.toml", "-o", tmp_path / "out"), fragment)
+    (tmp_path / "nomesh.toml").write_text('[[render.objects]]\nkind = "mesh"\n')
+    assert_one_line_error(arsim("render", tmp_path / "nomesh.toml", "-o", tmp_path / "out"), "needs mesh")
+    # maps baked before that lack the chosen method, or an exponent; a folder that is no bake
+    bake = tmp_path / "fast"
+    assert arsim("bake", ENVMAPS[1], "-o", bake, "--method", "fast", "--size", "16", "--spec", "1,80").returncode == 0
+    assert_one_line_error(arsim("render", "-o", tmp_path / "out", "--maps", bake, "--method", "sh"), "no sh maps")
+    (tmp_path / "sphere.toml").write_text('[[render.objects]]\nkind = "sphere"\nexponent = 40.0\n')
+    assert_one_line_error(arsim("render", tmp_path / "sphere.toml", "-o", tmp_path / "out", "--maps", bake), "exponent 40")
+    assert_one_line_error(arsim("render", "-o", tmp_path / "out", "--maps", tmp_path), "no bake.json")
     assert not (tmp_path / "out").exists()

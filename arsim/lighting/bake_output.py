@@ -6,8 +6,11 @@ import json
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
+from arsim.core.errors import ArsimError
 from arsim.core.files import write_text_atomic
-from arsim.core.hdr_io import write_exr
+from arsim.core.hdr_io import read_hdr, write_exr
 from arsim.lighting.methods import BakeResult, MapParameters, parameters_used
 
 
@@ -38,3 +41,24 @@ def write_bake(out_dir: Path, exponents: Sequence[float], method: str, params: M
     }
     write_text_atomic(out_dir / "bake.json", json.dumps(record, indent=2) + "\n")
     return paths + [out_dir / "bake.json"]
+
+
+def read_bake(folder: Path) -> tuple[str, dict[float, np.ndarray]]:
+    """A bake folder written by write_bake: its method and its maps by exponent; ArsimError where the
+    folder is not one, or a map it lists is missing or of another size."""
+    record_path = folder / "bake.json"
+    if not record_path.is_file():
+        raise ArsimError(f"{folder}: no bake.json here; give a folder written by `arsim bake`")
+    try:
+        record = json.loads(record_path.read_text(encoding="utf-8"))
+        method, files = str(record["method"]), record["maps"]
+        exponents = {name: float(entry["exponent"]) for name, entry in files.items()}
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ArsimError(f"{record_path}: not a bake record ({type(exc).__name__}: {exc}); bake the maps again with `arsim bake`") from None
+    maps = {}
+    for name, exponent in exponents.items():
+        image = read_hdr(folder / name)  # a missing or broken file raises its own one-line ArsimError
+        if image.shape[:2] != (image.shape[0], image.shape[0]) or (maps and image.shape != next(iter(maps.values())).shape):
+            raise ArsimError(f"{folder / name}: a {image.shape[1]} x {image.shape[0]} map among others; a bake's maps are one size")
+        maps[exponent] = image.astype(np.float32)
+    return method, maps

@@ -1,6 +1,7 @@
 """The virtual objects the AR session places on the tag (thesis figure 5.3 and 5.1): a row of spheres
-with Phong exponents from 1 to 1280, and a torus, non-convex, with a tangent-space normal map and an
-ambient-occlusion light map that arsim bakes itself by casting rays against the torus and the table.
+with Phong exponents from 1 to 1280, a torus, non-convex, with a tangent-space normal map and an
+ambient-occlusion light map that arsim bakes itself by casting rays against the torus and the table,
+and meshes read from files.
 
 Object space: y up, the object standing on the table plane y = 0.
 """
@@ -10,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from arsim.core.conventions import normalize
-from arsim.render.meshes import Mesh, grid_mesh, uv_sphere
+from arsim.core.errors import ArsimError
+from arsim.render.meshes import Mesh, grid_mesh, load_mesh, uv_sphere
 from arsim.render.renderer import Material, SceneObject
 
 SPHERE_EXPONENTS = (1.0, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0)  # thesis figure 5.3
@@ -95,7 +97,8 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
 
 
 def scene_objects(section) -> list[SceneObject]:
-    """The scenario's virtual objects ([[render.objects]], a RenderObjectSection each) as SceneObjects."""
+    """The scenario's virtual objects ([[render.objects]], a RenderObjectSection each) as SceneObjects; a
+    mesh that cannot be read raises ArsimError."""
     objects = []
     for o in section.objects:
         x, z = o.position_m
@@ -103,15 +106,36 @@ def scene_objects(section) -> list[SceneObject]:
             spacing = 2.6 * o.size_m
             for k, exponent in enumerate(SPHERE_EXPONENTS):
                 dx = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
-                objects.append(SceneObject(uv_sphere(o.size_m, 32, 64), Material(o.kd, o.ks, exponent),
+                objects.append(SceneObject(uv_sphere(o.size_m, 32, 64), Material(o.kd, o.ks, exponent, method=o.method),
                                            translation(x + dx, o.size_m, z), (uv_sphere(o.size_m, 16, 32), uv_sphere(o.size_m, 8, 16))))
         elif o.kind == "sphere":
-            objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent), translation(x, o.size_m, z),
-                                       (uv_sphere(o.size_m, 24, 48), uv_sphere(o.size_m, 12, 24))))
+            objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent, method=o.method),
+                                       translation(x, o.size_m, z), (uv_sphere(o.size_m, 24, 48), uv_sphere(o.size_m, 12, 24))))
+        elif o.kind == "mesh":
+            objects.append(mesh_object(o))
         else:
             minor = 0.4 * o.size_m
             objects.append(SceneObject(torus(o.size_m, minor), Material(
                 o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if o.light_map else None,
-                ridges_normal_map() if o.normal_map else None), translation(x, 0.0, z),
+                ridges_normal_map() if o.normal_map else None, o.method), translation(x, 0.0, z),
                 (torus(o.size_m, minor, 48, 24), torus(o.size_m, minor, 24, 12))))
     return objects
+
+
+def mesh_object(o) -> SceneObject:
+    """A mesh file's object: scaled so that its bounding box's largest side is size_m, standing on the
+    table (its lowest point at y = 0) with its box centred over position_m; the ridges normal map where
+    it has texture coordinates."""
+    if o.mesh is None:
+        raise ArsimError("[[render.objects]] kind = \"mesh\" needs mesh = \"FILE\" (an OBJ, PLY, STL, OFF or glTF file)")
+    mesh, textured = load_mesh(o.mesh)
+    low, high = mesh.positions.min(axis=0).astype(np.float64), mesh.positions.max(axis=0).astype(np.float64)
+    extent = float((high - low).max())
+    if extent <= 0.0:
+        raise ArsimError(f"{o.mesh}: the mesh has no extent (all its vertices coincide); fix the file")
+    scale = o.size_m / extent
+    centre = (low + high) / 2
+    model = translation(o.position_m[0] - scale * centre[0], -scale * low[1], o.position_m[1] - scale * centre[2])
+    model[:3, :3] *= scale
+    return SceneObject(mesh, Material(o.kd, o.ks, o.exponent, None, ridges_normal_map() if o.normal_map and textured else None,
+                                      o.method), model)

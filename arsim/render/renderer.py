@@ -22,6 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from arsim.core.conventions import CameraIntrinsics, gl_projection_from_intrinsics, gl_view_from_opencv_pose
+from arsim.core.errors import ArsimError
 from arsim.core.gl import core_shader, create_gl_context
 from arsim.core.resample import extend_beyond_rim
 from arsim.render.meshes import Mesh
@@ -48,6 +49,7 @@ class Material:
     exponent: float = 80.0
     light_map: np.ndarray | None = None
     normal_map: np.ndarray | None = None
+    method: str = ""  # whose maps light it ("": the renderer's default method)
 
 
 @dataclass
@@ -95,7 +97,7 @@ def mesh_edges(mesh: Mesh) -> np.ndarray:
 def overlay_image(lines: Sequence[str], frame_height: int) -> np.ndarray:
     """The overlay's text as an RGBA image (h, w, 4) uint8, row 0 at the top: white text (OpenCV's Hershey
     font, anti-aliased) on a black box at 55 % opacity; sized to the frame's height."""
-    scale = max(frame_height / 720.0, 0.4) * 0.6
+    scale = max(frame_height / 720.0 * 0.6, 0.35)  # (below 0.35 the Hershey font is not legible)
     thickness = max(int(round(scale * 1.6)), 1)
     sizes = [cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness) for line in lines]
     line_height = max((s[0][1] + s[1] for s in sizes), default=1) + 4
@@ -113,14 +115,19 @@ def _power_of_two(n: int, least: int = 16) -> int:
 
 
 class Renderer:
-    """Renders virtual objects lit by angle maps (maps[1.0]: irradiance, maps[s]: reflection, s > 1)."""
+    """Renders virtual objects lit by angle maps: maps[method][1.0] the irradiance map, maps[method][s]
+    the reflection map for exponent s > 1; a material takes its method's maps. One method's maps may be
+    given as they are ({1.0: ..., 80.0: ...}: the method ""). Materials that name no method take
+    `method` (default: the first in maps)."""
 
-    def __init__(self, camera: CameraIntrinsics, maps: dict[float, np.ndarray], ctx=None, debug: bool = False,
-                 near: float = 0.02, far: float = 50.0):
+    def __init__(self, camera: CameraIntrinsics, maps: dict, ctx=None, debug: bool = False,
+                 near: float = 0.02, far: float = 50.0, method: str | None = None):
         self.ctx = ctx or create_gl_context()
         self.camera, self.debug, self.near = camera, debug, near
         self.projection = gl_projection_from_intrinsics(camera, near, far)
-        self.maps = {s: self._map_texture(m) for s, m in maps.items()}
+        by_method = maps if all(isinstance(k, str) for k in maps) else {"": maps}
+        self.maps = {(name, float(s)): self._map_texture(m) for name, ms in by_method.items() for s, m in ms.items()}
+        self.default_method = next(iter(by_method)) if method is None else method
         self.objects: list[_Drawable] = []
         self.tiles: dict[tuple[int, int], _Tile] = {}
         self.tile: _Tile | None = None  # the last render_objects' tile; None when nothing was in view
@@ -148,8 +155,13 @@ class Renderer:
 
     def add(self, obj: SceneObject) -> None:
         m = obj.material
-        if m.exponent not in self.maps:
-            raise ValueError(f"no reflection map for exponent {m.exponent:g}; maps for: {sorted(self.maps)}")
+        method = m.method or self.default_method
+        missing = [s for s in (1.0, float(m.exponent)) if (method, s) not in self.maps]
+        if missing:
+            held = ", ".join(sorted({f"{name or 'default'}: " + ", ".join(f"{s:g}" for n, s in sorted(self.maps) if n == name)
+                                     for name, _ in self.maps}))
+            raise ArsimError(f"no {method or 'default'} maps for exponent {', '.join(f'{s:g}' for s in missing)} "
+                             f"(the maps held: {held}); compute or load that method's maps for every exponent the objects use")
         defines = (["LIGHT_MAP"] if m.light_map is not None else []) + (["NORMAL_MAP"] if m.normal_map is not None else [])
         defines += ["DEBUG"] if self.debug else []
         defines += ["FLOAT_FILTERING"] if "llvmpipe" in self.ctx.info["GL_RENDERER"] else []
@@ -220,7 +232,8 @@ class Renderer:
             program["kd"].value = tuple(obj.material.kd)
             program["ks"].value = tuple(obj.material.ks)
             program["eye"].value = tuple(eye)
-            units = [("irradiance_map", self.maps[1.0]), ("reflection_map", self.maps[obj.material.exponent])]
+            method = obj.material.method or self.default_method
+            units = [("irradiance_map", self.maps[method, 1.0]), ("reflection_map", self.maps[method, float(obj.material.exponent)])]
             units += [(name, tex) for name, tex in d.textures.items() if tex is not None]
             for unit, (name, tex) in enumerate(units):
                 tex.use(unit)

@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from arsim.capture.pipeline import read_frame
+from arsim.core.errors import ArsimError
 from arsim.core.files import atomic_path, write_bytes_atomic
 from arsim.core.gl import create_gl_context
 from arsim.core.png import png_bytes
@@ -35,7 +36,7 @@ GL_STEPS = ("background", "objects", "tone_mapping", "overlay")
 
 @dataclass(frozen=True)
 class SessionSettings:
-    method: str = "fast"  # map method for the captured probe (and the truth frame's maps)
+    method: str = "fast"  # map method of the materials that name none (the truth frame's maps the same)
     key: float = 0.18  # Reinhard's a
     white: float = 2.0  # L_white
     log_average: bool = False  # Reinhard's log-average instead of the mean luminance (thesis: the mean)
@@ -63,9 +64,29 @@ class SessionResult:
         }
 
 
-def session_maps(probe: np.ndarray, exponents: Sequence[float], method: str) -> dict[float, np.ndarray]:
-    maps = bake(probe, list(exponents), method).maps
-    return {float(s): m for s, m in zip(exponents, maps)}
+def maps_needed(objects: Sequence[SceneObject], method: str) -> dict[str, list[float]]:
+    """Per map method, the exponents the objects' materials need (1: the irradiance map); materials that
+    name no method take `method`."""
+    needed: dict[str, set[float]] = {}
+    for obj in objects:
+        needed.setdefault(obj.material.method or method, {1.0}).add(float(obj.material.exponent))
+    return {name: sorted(exponents) for name, exponents in needed.items()}
+
+
+def session_maps(env: np.ndarray, needed: dict[str, list[float]]) -> dict[str, dict[float, np.ndarray]]:
+    """The maps of every method the objects need, computed from the angle map env."""
+    return {name: dict(zip(exponents, bake(env, exponents, name).maps)) for name, exponents in needed.items()}
+
+
+def check_maps(maps: dict[str, dict[float, np.ndarray]], needed: dict[str, list[float]]) -> None:
+    """ArsimError naming what is missing where given maps lack a method or an exponent the objects need."""
+    for name, exponents in needed.items():
+        missing = [s for s in exponents if s not in maps.get(name, {})]
+        if missing:
+            held = "; ".join(f"{m}: {', '.join(f'{s:g}' for s in sorted(ms))}" for m, ms in maps.items()) or "none"
+            spec = ",".join(f"{s:g}" for s in exponents)
+            raise ArsimError(f"no {name} maps for exponent {', '.join(f'{s:g}' for s in missing)} among the maps given "
+                             f"({held}); bake them: arsim bake PROBE.exr -o DIR --method {name} --spec {spec}")
 
 
 FLIP_MARGIN = 32  # pixels around the mask's bounding box: beyond FLIP's filters at its default 67 pixels per degree
@@ -85,20 +106,19 @@ def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> fl
     return float((error[..., 0] if error.ndim == 3 else error)[mask[box]].mean())
 
 
-def run_session(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, truth: np.ndarray, out_dir: Path,
+def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_maps: dict, out_dir: Path,
                 objects: list[SceneObject], settings: SessionSettings = SessionSettings(),
                 progress: Callable[[float], None] = lambda fraction: None) -> SessionResult:
-    """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by maps
-    from `probe` (the captured angle map) and truth frames from `truth` (the true one); writes
-    frames/*.png and session.mp4 into out_dir."""
+    """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
+    (per method, per exponent: from the captured probe, or baked before) and truth frames lit by
+    `truth_maps` (the same from the true environment); writes frames/*.png and session.mp4 into out_dir."""
     ctx = create_gl_context()
     camera = recording_camera(rec)
     table = rec.meta["table"]
     tracker = TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
-    exponents = sorted({1.0} | {o.material.exponent for o in objects})
     renderers = []
-    for env in (probe, truth):
-        renderer = Renderer(camera, session_maps(env, exponents, settings.method), ctx)
+    for light in (maps, truth_maps):
+        renderer = Renderer(camera, light, ctx, method=settings.method)
         for obj in objects:
             renderer.add(obj)
         renderers.append(renderer)

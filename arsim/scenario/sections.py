@@ -176,15 +176,21 @@ MAP_METHODS = ("accurate", "bounds", "fast", "mipmap", "sh", "mc")  # arsim.ligh
 class RenderObjectSection:
     """[[render.objects]]: a virtual object standing on the table (the tag's centre is the origin)."""
 
-    kind: str = setting("torus", choices=("torus", "sphere", "sphere_row"),
-                        help="torus (normal map, baked AO light map), sphere, or sphere_row (exponents 1 to 1280)")
+    kind: str = setting("torus", choices=("torus", "sphere", "sphere_row", "mesh"),
+                        help="torus (normal map, baked AO light map), sphere, sphere_row (exponents 1 to 1280), "
+                             "or mesh (a triangle mesh file: `mesh`)")
+    mesh: Path | None = setting(None, must_exist=True,
+                                help="kind = mesh: OBJ, PLY, STL, OFF or glTF file; relative to the scenario, then to assets/")
     position_m: tuple[float, float] = setting((0.0, 0.0), min=-100.0, max=100.0, unit="m",
                                               help="where it stands: world x and z (a row: its centre)")
-    size_m: float = setting(0.05, min=0.001, max=10.0, unit="m", help="torus: ring radius; sphere and row: sphere radius")
+    size_m: float = setting(0.05, min=0.001, max=10.0, unit="m",
+                            help="torus: ring radius; sphere and row: sphere radius; mesh: the largest side of its bounding box")
     kd: tuple[float, float, float] = setting((0.7, 0.55, 0.4), min=0.0, max=1.0, help="diffuse coefficient k_d (RGB)")
     ks: tuple[float, float, float] = setting((0.2, 0.2, 0.2), min=0.0, max=1.0, help="specular coefficient k_s (RGB)")
     exponent: float = setting(80.0, min=1.0, max=100000.0, help="Phong exponent: the reflection map used (not for a row)")
-    normal_map: bool = setting(True, help="torus: its tangent-space ridges normal map")
+    method: str = setting("", choices=("",) + MAP_METHODS,
+                          help="map method of this object's maps (default \"\": [render] method)")
+    normal_map: bool = setting(True, help="torus, and a mesh with texture coordinates: the tangent-space ridges normal map")
     light_map: bool = setting(True, help="torus: its baked ambient-occlusion light map")
 
 
@@ -200,8 +206,9 @@ class RenderSection:
     overlay: bool = setting(False, help="draw the overlay (frame time, map state) at the frames' top left")
     objects: tuple[RenderObjectSection, ...] = subsection(
         RenderObjectSection, array=True,
-        default=(RenderObjectSection("sphere_row", (0.0, -0.14), 0.016, (0.15, 0.15, 0.15), (0.8, 0.8, 0.8)),
-                 RenderObjectSection("torus", (0.0, 0.0), 0.05)),
+        default=(RenderObjectSection("sphere_row", position_m=(0.0, -0.14), size_m=0.016, kd=(0.15, 0.15, 0.15),
+                                     ks=(0.8, 0.8, 0.8)),
+                 RenderObjectSection("torus", position_m=(0.0, 0.0), size_m=0.05)),
         help="the virtual objects")
 
 
