@@ -55,22 +55,26 @@ def shadow():
     return np.where(np.arange(64)[:, None, None] < 32, 0.3, 1.0) * np.ones((64, 128, 3))
 
 
-def render(gl, maps, material, debug=False):
+EYE = np.array([0.05, 0.35, 0.3])
+
+
+def render(gl, maps, material, debug=False, impostor=False):
+    """A sphere of radius 0.1 at (0, 0.1, 0): a mesh, or (impostor) ray-cast through a quad."""
     r = Renderer(CAMERA, maps, gl, debug=debug)
     model = np.eye(4)
     model[:3, 3] = [0.0, 0.1, 0.0]
-    r.add(SceneObject(uv_sphere(0.1), material, model))
-    r.render_objects(*look_at(np.array([0.05, 0.35, 0.3]), [0.0, 0.1, 0.0]))
+    r.add(SceneObject(uv_sphere(0.1), material, model, sphere=0.1 if impostor else None))
+    r.render_objects(*look_at(EYE, [0.0, 0.1, 0.0]))
     return r
 
 
-@pytest.mark.parametrize("with_maps", [False, True])
-def test_gl_shading_equals_the_numpy_reference(gl, maps, with_maps):
+@pytest.mark.parametrize("with_maps, impostor", [(False, False), (True, False), (False, True)])
+def test_gl_shading_equals_the_numpy_reference(gl, maps, with_maps, impostor):
     """Shaded with the vectors GL interpolated (read back from debug targets), the NumPy equations give
     the HDR buffer within 1e-3 relative: RGBA16F holds 2^-10 of a value at worst, and llvmpipe's
     conversion to half floats truncates (half the pixels one step low): 9.8e-4 at most."""
     material = Material(KD, KS, 80.0, shadow() if with_maps else None, bumps() if with_maps else None)
-    r = render(gl, maps, material, debug=True)
+    r = render(gl, maps, material, debug=True, impostor=impostor)
     hdr, mask = r.read_hdr(), r.read_mask() > 0.5
     normal, incident = r.read_debug()
     assert 0.03 < mask.mean() < 0.5
@@ -97,6 +101,29 @@ def test_tone_mapping_equals_the_numpy_reference_within_one_step(gl, maps, key, 
     expected = np.where(inside[..., None], np.clip(np.round(reference * 255), 0, 255), background)
     assert np.abs(out.astype(int) - expected.astype(int)).max() <= 1
     assert (out[~inside] == background[~inside]).all()  # the camera image passes where nothing is drawn
+
+
+def test_a_ray_cast_sphere_has_the_exact_outline_and_normals(gl, maps):
+    """The impostor's pixels are those whose rays hit the sphere (up to the pixels the outline crosses),
+    and its normals are the sphere's at the hit, within float precision."""
+    r = render(gl, maps, Material(KD, KS, 80.0), debug=True, impostor=True)
+    mask = r.read_mask() > 0.5
+    normal, incident = (v[..., :3].astype(np.float64) for v in r.read_debug())
+    rotation, _ = look_at(EYE, [0.0, 0.1, 0.0])
+    rows, cols = np.mgrid[0:CAMERA.height, 0:CAMERA.width]
+    rays = np.stack([(cols - CAMERA.cx) / CAMERA.fx, (rows - CAMERA.cy) / CAMERA.fy, np.ones(rows.shape)], -1)
+    rays = rotation.inv().apply(rays.reshape(-1, 3)).reshape(rays.shape)
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    centre, radius = np.array([0.0, 0.1, 0.0]), 0.1
+    b = rays @ (EYE - centre)
+    disc = b * b - (np.sum((EYE - centre) ** 2) - radius ** 2)
+    hits = disc > 0
+    from scipy.ndimage import binary_dilation, binary_erosion
+    outline = binary_dilation(hits) & ~binary_erosion(hits)
+    assert hits.sum() > 2000 and (mask == hits)[~outline].all()
+    np.testing.assert_allclose(incident[mask], rays[mask], atol=2e-5)  # the same rays
+    expected = (EYE + (-b - np.sqrt(np.maximum(disc, 0)))[..., None] * rays - centre) / radius
+    assert np.abs(normal[mask] - expected[mask]).max() < 1e-4
 
 
 def test_light_maps_and_normal_maps_change_exactly_their_pixels(gl, maps):

@@ -90,6 +90,25 @@ def ridges_normal_map(size: tuple[int, int] = (128, 256), ridges: tuple[int, int
     return (n * 0.5 + 0.5).astype(np.float32)
 
 
+def _chord_gap(radius: float, steps_per_turn: int) -> float:
+    """How far a polygon of steps_per_turn sides inscribed in a circle of this radius departs from it."""
+    return radius * (1.0 - np.cos(np.pi / steps_per_turn))
+
+
+def sphere_lods(radius: float, rings: int) -> tuple[tuple[Mesh, float], ...]:
+    """Coarser latitude-longitude spheres than rings x 2 rings, down to 6 x 12, with their departures
+    from the sphere (a cell's centre lies inside by about the sum of its two chords' gaps)."""
+    steps = [r for r in (36, 24, 16, 12, 8, 6) if r < rings]
+    return tuple((uv_sphere(radius, r, 2 * r), _chord_gap(radius, 2 * r) * 2) for r in steps)
+
+
+def torus_lods(major: float, minor: float, rings: int) -> tuple[tuple[Mesh, float], ...]:
+    """Coarser tori than rings x rings / 2, down to 16 x 8, with their departures from the torus (the ring's
+    and the tube's chord gaps added)."""
+    steps = [r for r in (64, 48, 32, 24, 16) if r < rings]
+    return tuple((torus(major, minor, r, r // 2), _chord_gap(major + minor, r) + _chord_gap(minor, r // 2)) for r in steps)
+
+
 def translation(x: float, y: float, z: float) -> np.ndarray:
     model = np.eye(4)
     model[:3, 3] = [x, y, z]
@@ -107,10 +126,10 @@ def scene_objects(section) -> list[SceneObject]:
             for k, exponent in enumerate(SPHERE_EXPONENTS):
                 dx = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
                 objects.append(SceneObject(uv_sphere(o.size_m, 32, 64), Material(o.kd, o.ks, exponent, method=o.method),
-                                           translation(x + dx, o.size_m, z), (uv_sphere(o.size_m, 16, 32), uv_sphere(o.size_m, 8, 16))))
+                                           translation(x + dx, o.size_m, z), sphere_lods(o.size_m, 32), sphere=o.size_m))
         elif o.kind == "sphere":
             objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent, method=o.method),
-                                       translation(x, o.size_m, z), (uv_sphere(o.size_m, 24, 48), uv_sphere(o.size_m, 12, 24))))
+                                       translation(x, o.size_m, z), sphere_lods(o.size_m, 48), sphere=o.size_m))
         elif o.kind == "mesh":
             objects.append(mesh_object(o))
         else:
@@ -118,7 +137,7 @@ def scene_objects(section) -> list[SceneObject]:
             objects.append(SceneObject(torus(o.size_m, minor), Material(
                 o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if o.light_map else None,
                 ridges_normal_map() if o.normal_map else None, o.method), translation(x, 0.0, z),
-                (torus(o.size_m, minor, 48, 24), torus(o.size_m, minor, 24, 12))))
+                torus_lods(o.size_m, minor, 96)))
     return objects
 
 

@@ -57,14 +57,20 @@ class SceneObject:
     mesh: Mesh
     material: Material
     model: np.ndarray = field(default_factory=lambda: np.eye(4))  # object to world
-    lods: tuple[Mesh, ...] = ()  # coarser meshes of the same surface, finest first, for when it is far away
+    # Coarser meshes of the same surface for when it is far away, finest first, each with its largest
+    # departure from the surface (object units); the mesh itself counts as exact.
+    lods: tuple[tuple[Mesh, float], ...] = ()
+    # A sphere of this radius (object units) about the object's origin, the mesh its tessellation: without
+    # light and normal maps it is drawn as a camera-facing quad that the fragment shader ray-casts (the
+    # exact outline and normals, from two triangles: llvmpipe spends about a microsecond per triangle).
+    sphere: float | None = None
 
 
-# Level of detail: the coarsest mesh whose long edges stay under this many pixels on the screen. llvmpipe
-# pays per triangle about what it pays for 30 pixels; the default torus at 0.9 m takes 8 ms with its finest
-# mesh and 4 ms with the next. A chord of 14 pixels departs from a circle of radius r pixels by 24/r
-# pixels: under a third of a pixel where the meshes switch on the default objects.
-LOD_EDGE_PX = 14.0
+# Level of detail: the coarsest mesh whose departure from the surface stays under this many pixels on the
+# screen (where the object is nearest). llvmpipe shades pixels in blocks, so a triangle of a few pixels
+# costs many times its area: the default torus at 0.8 m takes 6 ms with its finest mesh, 2.6 with a
+# coarse one. Shading interpolates the true normals, so the mesh shows only in the outline.
+LOD_ERROR_PX = 0.5
 
 
 @dataclass
@@ -72,9 +78,11 @@ class _Drawable:
     obj: SceneObject
     program: object
     vaos: list  # per mesh: the object's mesh, then its lods
-    edges: np.ndarray  # per mesh: its long edges' length in world units (90th percentile)
-    textures: dict
+    errors: np.ndarray  # per mesh: its largest departure from the surface, world units
+    units: list  # the textures, in their units: irradiance map, reflection map, light map, normal map
     corners: np.ndarray  # (8, 4) the world bounding box's corners, homogeneous
+    texel_world: dict  # per texture: world length per texel along the surface (median over triangles)
+    sphere: tuple[np.ndarray, float] | None = None  # a ray-cast sphere's world centre and radius
 
 
 @dataclass
@@ -85,13 +93,31 @@ class _Tile:
     hdr: object
     mask: object
     fbo: object
+    clear_fbo: object  # the mask and the depth (and the debug targets): what clears fast
+    zeros: bytes  # an HDR tile of zeros
     debug: list = field(default_factory=list)
+    dirty: tuple[int, int] = (0, 0)  # the HDR colour's lower-left part written since it was zeroed
+
+    def clear(self, width: int, height: int) -> None:
+        """Clear for a frame whose rectangle is width x height. llvmpipe clears 64-bit pixels (RGBA16F)
+        through a slow path, 3 to 5 times what uploading zeros takes: the HDR colour gets zeros uploaded
+        over the part the last frame wrote, the 32-bit targets a clear."""
+        self.clear_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        w, h = self.dirty
+        if w and h:
+            self.hdr.write(memoryview(self.zeros)[:w * h * 8], viewport=(0, 0, w, h))
+        self.dirty = (width, height)
 
 
-def mesh_edges(mesh: Mesh) -> np.ndarray:
-    """The lengths of a mesh's triangle edges (each edge once per triangle)."""
-    p = mesh.positions[mesh.indices]  # (T, 3, 3)
-    return np.linalg.norm(p - np.roll(p, 1, axis=1), axis=-1).ravel()
+def texel_length(mesh: Mesh, uvs: np.ndarray, texture_size: int) -> float:
+    """The world length a texel of a square-ish texture of texture_size texels spans on the mesh: the
+    median over its triangles of sqrt(world area / UV area) / texture_size."""
+    p, t = mesh.positions[mesh.indices].astype(np.float64), uvs[mesh.indices].astype(np.float64)
+    world = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    d1, d2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    uv = np.abs(d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1])
+    ok = (uv > 0) & (world > 0)
+    return float(np.median(np.sqrt(world[ok] / uv[ok]))) / texture_size if ok.any() else 0.0
 
 
 def overlay_image(lines: Sequence[str], frame_height: int) -> np.ndarray:
@@ -132,9 +158,13 @@ class Renderer:
         self.tiles: dict[tuple[int, int], _Tile] = {}
         self.tile: _Tile | None = None  # the last render_objects' tile; None when nothing was in view
         self.rect: tuple[int, int, int, int] | None = None  # its rectangle in the frame: x, y (GL, from the bottom), w, h
+        self.rects: list[tuple[int, int, int, int]] = []  # the objects' own rectangles in it
         # The output: the camera frame written in (step 4), the tone-mapped objects drawn over it (step 6).
-        # (RGBA: llvmpipe writes and draws into 3-byte pixels through a slow path, 2-3 times the time)
+        # Its rows run from the image's top, as the camera delivers them (the passes that draw into it
+        # flip GL's bottom-up rows instead of a copy of each frame), and it is RGBA (llvmpipe writes and
+        # draws into 3-byte pixels through a slow path, 2-3 times the time).
         self.output = self.ctx.texture((camera.width, camera.height), 4, dtype="f1")
+        self._rgba = np.empty((camera.height, camera.width, 4), np.uint8)
         self.output_fbo = self.ctx.framebuffer([self.output])
         self.tonemappers = {}
         self.overlay_program = None
@@ -165,34 +195,59 @@ class Renderer:
         defines = (["LIGHT_MAP"] if m.light_map is not None else []) + (["NORMAL_MAP"] if m.normal_map is not None else [])
         defines += ["DEBUG"] if self.debug else []
         defines += ["FLOAT_FILTERING"] if "llvmpipe" in self.ctx.info["GL_RENDERER"] else []
-        program = self.ctx.program(vertex_shader=_source("object.vert", defines), fragment_shader=_source("object.frag", defines))
-        sizes = {"in_position": 3, "in_normal": 3, "in_tangent": 3, "in_uv": 2, "in_uv2": 2}
-        used = [n for n in sizes if n in program]  # the compiler drops what a variant does not read
-        layout = " ".join(f"{k}f" if n in used else f"{k}x4" for n, k in sizes.items())
-        meshes = (obj.mesh, *obj.lods)
-        vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.interleaved().tobytes()), layout, *used)],
-                                      self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes())) for mesh in meshes]
         scale = np.abs(np.linalg.eigvalsh(obj.model[:3, :3].T @ obj.model[:3, :3])).max() ** 0.5
-        edges = np.array([np.percentile(mesh_edges(mesh), 90) * scale for mesh in meshes])
+        sphere = None
+        if obj.sphere is not None and m.light_map is None and m.normal_map is None:
+            defines.append("SPHERE_IMPOSTOR")
+            program = self.ctx.program(vertex_shader=_source("sphere.vert", defines), fragment_shader=_source("object.frag", defines))
+            quad = np.array([(-1, -1), (1, -1), (-1, 1), (-1, 1), (1, -1), (1, 1)], dtype="f4")  # counter-clockwise
+            vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(quad.tobytes()), "2f", "in_corner")])]
+            sphere = (obj.model[:3, 3].astype(np.float64), float(obj.sphere * scale))
+            program["center"].value, program["radius"].value = tuple(sphere[0]), sphere[1]
+        else:
+            program = self.ctx.program(vertex_shader=_source("object.vert", defines), fragment_shader=_source("object.frag", defines))
+            sizes = {"in_position": 3, "in_normal": 3, "in_tangent": 3, "in_uv": 2, "in_uv2": 2}
+            used = [n for n in sizes if n in program]  # the compiler drops what a variant does not read
+            layout = " ".join(f"{k}f" if n in used else f"{k}x4" for n, k in sizes.items())
+            meshes = (obj.mesh, *(mesh for mesh, _ in obj.lods))
+            vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.interleaved().tobytes()), layout, *used)],
+                                          self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes())) for mesh in meshes]
+            program["model"].write(obj.model.T.astype("f4").tobytes())
+            program["normal_matrix"].write(np.linalg.inv(obj.model[:3, :3]).astype("f4").tobytes())  # (inverse transpose, column-major)
+        errors = np.array([0.0] + [error * scale for _, error in obj.lods])[:len(vaos)]
         textures = {"light_map": self._image_texture(m.light_map) if m.light_map is not None else None,
                     "normal_map": self._image_texture(m.normal_map) if m.normal_map is not None else None}
+        # What does not change from frame to frame, set once: each object has its own program.
+        program["kd"].value, program["ks"].value = tuple(m.kd), tuple(m.ks)
+        units = [self.maps[method, 1.0], self.maps[method, float(m.exponent)]] + [t for t in textures.values() if t is not None]
+        names = ["irradiance_map", "reflection_map"] + [n for n, t in textures.items() if t is not None]
+        for unit, name in enumerate(names):
+            program[name].value = unit
+        texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
+                                                  max(tex.size)) for name, tex in textures.items() if tex is not None}
         low, high = obj.mesh.positions.min(axis=0), obj.mesh.positions.max(axis=0)
         corners = np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
-        self.objects.append(_Drawable(obj, program, vaos, edges, textures, corners @ obj.model.T))
+        self.objects.append(_Drawable(obj, program, vaos, errors, units, corners @ obj.model.T, texel_world, sphere))
+        self.corners = np.stack([d.corners for d in self.objects])  # (objects, 8, 4)
 
-    def screen_rect(self, view_projection: np.ndarray) -> tuple[int, int, int, int] | None:
-        """The frame's rectangle (x, y from the bottom, w, h) that holds every object: their bounding
-        boxes projected, a pixel around; the whole frame when a box reaches behind the near plane; None
-        when no object can be in view."""
+    def screen_rects(self, view_projection: np.ndarray) -> list[tuple[int, int, int, int]]:
+        """Per object that can be in view, the frame's rectangle (x, y from the bottom, w, h) that holds
+        it: its bounding box projected, a pixel around; the whole frame when the box reaches behind the
+        near plane."""
         width, height = self.camera.width, self.camera.height
-        clip = np.concatenate([d.corners for d in self.objects]) @ view_projection.T
-        if (clip[:, 3] < self.near).any():
-            return (0, 0, width, height) if (clip[:, 3] > 0).any() else None
-        ndc = clip[:, :2] / clip[:, 3:]
-        pixels = (ndc * 0.5 + 0.5) * [width, height]
-        x0, y0 = np.maximum(np.floor(pixels.min(axis=0)).astype(int) - 1, 0)
-        x1, y1 = np.minimum(np.ceil(pixels.max(axis=0)).astype(int) + 1, [width, height])
-        return (int(x0), int(y0), int(x1 - x0), int(y1 - y0)) if x1 > x0 and y1 > y0 else None
+        clip = self.corners @ view_projection.T  # (objects, 8, 4)
+        w = clip[..., 3]
+        pixels = (clip[..., :2] / np.where(w > 0, w, 1.0)[..., None] * 0.5 + 0.5) * [width, height]
+        low = np.maximum(np.floor(pixels.min(axis=1)).astype(int) - 1, 0)
+        high = np.minimum(np.ceil(pixels.max(axis=1)).astype(int) + 1, [width, height])
+        rects = []
+        for k in range(len(clip)):
+            if (w[k] < self.near).any():
+                if (w[k] > 0).any():
+                    rects.append((0, 0, width, height))
+            elif (high[k] > low[k]).all():
+                rects.append((int(low[k, 0]), int(low[k, 1]), int(high[k, 0] - low[k, 0]), int(high[k, 1] - low[k, 1])))
+        return rects
 
     def _tile(self, width: int, height: int) -> _Tile:
         size = (min(_power_of_two(width), _power_of_two(self.camera.width)),
@@ -200,13 +255,16 @@ class Renderer:
         if size not in self.tiles:
             hdr, mask = self.ctx.texture(size, 4, dtype="f2"), self.ctx.texture(size, 2, dtype="f2")
             debug = [self.ctx.texture(size, 4, dtype="f4") for _ in range(2)] if self.debug else []
-            fbo = self.ctx.framebuffer([hdr, mask, *debug], self.ctx.depth_renderbuffer(size))
-            self.tiles[size] = _Tile(hdr, mask, fbo, debug)
+            depth = self.ctx.depth_renderbuffer(size)
+            fbo = self.ctx.framebuffer([hdr, mask, *debug], depth)
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)  # (a new texture's content is undefined)
+            self.tiles[size] = _Tile(hdr, mask, fbo, self.ctx.framebuffer([mask, *debug], depth), bytes(size[0] * size[1] * 8), debug)
         return self.tiles[size]
 
     def no_objects(self) -> None:
         """A frame without objects (the tag lost): the tone mapping leaves the camera frame as it is."""
         self.rect = self.tile = None
+        self.rects = []
 
     def render_objects(self, rotation: Rotation, translation: np.ndarray) -> None:
         """Step 5: the objects into the HDR colour and the mask, seen from the OpenCV world-to-camera
@@ -214,40 +272,41 @@ class Renderer:
         view = gl_view_from_opencv_pose(rotation, translation)
         view_projection = self.projection @ view
         eye = -rotation.as_matrix().T @ np.asarray(translation, dtype=np.float64)
-        self.rect = self.screen_rect(view_projection) if self.objects else None
-        if self.rect is None:
+        self.rects = self.screen_rects(view_projection)
+        if not self.rects:
             return self.no_objects()
+        corners = np.array([(x, y, x + w, y + h) for x, y, w, h in self.rects])
+        x0, y0 = corners[:, :2].min(axis=0)
+        x1, y1 = corners[:, 2:].max(axis=0)
+        self.rect = (int(x0), int(y0), int(x1 - x0), int(y1 - y0))
         x, y, w, h = self.rect
         self.tile = self._tile(w, h)
         self.tile.fbo.use()
-        self.tile.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        self.tile.clear(w, h)
         self.tile.fbo.viewport = (-x, -y, self.camera.width, self.camera.height)  # the rectangle's corner at the tile's
         self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)  # closed meshes: their back faces are hidden
-        for d in self.objects:
-            obj, program = d.obj, d.program
-            normal_matrix = np.linalg.inv(obj.model[:3, :3]).T
-            program["model"].write(obj.model.T.astype("f4").tobytes())
+        depths = np.maximum((self.corners @ view_projection.T)[..., 3].min(axis=1), self.near)  # nearest points
+        for d, depth in zip(self.objects, depths):
+            program = d.program
             program["view_projection"].write(view_projection.T.astype("f4").tobytes())
-            program["normal_matrix"].write(normal_matrix.T.astype("f4").tobytes())
-            program["kd"].value = tuple(obj.material.kd)
-            program["ks"].value = tuple(obj.material.ks)
             program["eye"].value = tuple(eye)
-            method = obj.material.method or self.default_method
-            units = [("irradiance_map", self.maps[method, 1.0]), ("reflection_map", self.maps[method, float(obj.material.exponent)])]
-            units += [(name, tex) for name, tex in d.textures.items() if tex is not None]
-            for unit, (name, tex) in enumerate(units):
+            for unit, tex in enumerate(d.units):
                 tex.use(unit)
-                program[name].value = unit
-            depth = max((d.corners @ view_projection.T)[:, 3].min(), self.near)  # its nearest point's distance
-            on_screen = d.edges * self.camera.fx / depth
-            d.vaos[max([k for k, px in enumerate(on_screen) if px <= LOD_EDGE_PX], default=0)].render()
+            # The light and normal maps' mip level per object and frame, log2 of texels per pixel where it is
+            # nearest: llvmpipe's per-pixel level (derivatives, two levels) took 40 % of the torus's time.
+            for name, length in d.texel_world.items():
+                program[f"{name}_lod"].value = max(float(np.log2(depth / (length * self.camera.fx))), 0.0) if length > 0 else 0.0
+            if d.sphere is not None and np.linalg.norm(d.sphere[0] - eye) <= d.sphere[1] * 1.001:
+                continue  # the camera inside a sphere: its back faces, culled
+            on_screen = d.errors * self.camera.fx / depth
+            d.vaos[max(k for k, px in enumerate(on_screen) if px <= LOD_ERROR_PX or k == 0)].render()
         self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
 
     def _tonemapper(self, log_average: bool):
         if log_average not in self.tonemappers:
             defines = ["LOG_AVERAGE"] if log_average else []
-            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("tonemap.frag", defines))
-            self.tonemappers[log_average] = (program, self.ctx.vertex_array(program, []))
+            program = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=_source("tonemap.frag", defines))
+            self.tonemappers[log_average] = program
         return self.tonemappers[log_average]
 
     def top_level(self) -> int:
@@ -263,7 +322,7 @@ class Renderer:
 
     def background_pass(self, background: np.ndarray) -> None:
         """Step 4: the camera frame (H, W, 3) uint8, row 0 at the top, into the output."""
-        self.output.write(cv2.cvtColor(cv2.flip(background, 0), cv2.COLOR_RGB2RGBA))  # GL's rows are bottom-up
+        self.output.write(cv2.cvtColor(background, cv2.COLOR_RGB2RGBA, dst=self._rgba))
 
     def tonemap_pass(self, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> None:
         """Step 6: the tone-mapped objects over the output's background, without reading it back."""
@@ -272,7 +331,7 @@ class Renderer:
         self.tile.hdr.build_mipmaps()  # its alpha is the mask's coverage
         if log_average:
             self.tile.mask.build_mipmaps()  # its second channel: log(delta + L_w) of the masked pixels
-        program, vao = self._tonemapper(log_average)
+        program = self._tonemapper(log_average)
         for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("mask", self.tile.mask)]):
             if name in program:  # the mask's log channel: only the log-average reads it
                 tex.use(unit)
@@ -280,10 +339,18 @@ class Renderer:
         program["key"].value, program["white"].value = key, white
         program["top_level"].value = self.top_level()
         program["origin"].value = self.rect[:2]
+        program["frame_size"].value = (self.camera.width, self.camera.height)
+        program["frame_height"].value = self.camera.height
+        # Only the objects' own rectangles (two triangles each; where they overlap, a pixel is mapped twice
+        # to the same value): a fraction of their union, which holds the space between them.
+        corners = np.array([[(x, y), (x + w, y), (x, y + h), (x, y + h), (x + w, y), (x + w, y + h)]
+                            for x, y, w, h in self.rects], dtype="f4")
+        vbo = self.ctx.buffer(corners.tobytes())
         self.output_fbo.use()
-        self.output_fbo.viewport = self.rect  # only the objects' rectangle
-        vao.render(vertices=3)
-        self.output_fbo.viewport = (0, 0, self.camera.width, self.camera.height)
+        vao = self.ctx.vertex_array(program, [(vbo, "2f", "in_corner")])
+        vao.render()
+        vao.release()
+        vbo.release()
 
     def overlay_pass(self, lines: Sequence[str]) -> None:
         """Step 7: the user interface, lines of text (frame time, bake progress) in a translucent box at
@@ -298,13 +365,13 @@ class Renderer:
             textures[(w, h)] = self.ctx.texture((w, h), 4, dtype="f1")
             textures[(w, h)].filter = self.ctx.NEAREST, self.ctx.NEAREST
         texture = textures[(w, h)]
-        texture.write(np.ascontiguousarray(image[::-1]))
+        texture.write(np.ascontiguousarray(image))  # (the output's rows run from the top: no flip)
         texture.use(0)
         program["text"].value = 0
         margin = max(self.camera.height // 90, 2)
         self.overlay_box = np.s_[margin:margin + h, margin:margin + w]  # in the image, row 0 at the top
         self.output_fbo.use()
-        self.output_fbo.viewport = (margin, max(self.camera.height - margin - h, 0), w, h)
+        self.output_fbo.viewport = (margin, margin, w, h)
         self.ctx.enable(self.ctx.BLEND)
         self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
         vao.render(vertices=3)
@@ -332,7 +399,7 @@ class Renderer:
     def read_output(self) -> np.ndarray:
         """The frame (H, W, 3) uint8 after the last passes."""
         data = np.frombuffer(self.output.read(), dtype=np.uint8).reshape(self.camera.height, self.camera.width, 4)
-        return data[::-1, :, :3]
+        return data[..., :3]
 
     def read_hdr(self) -> np.ndarray:
         return self._read_tile("hdr", 4, "f2")[..., :3]

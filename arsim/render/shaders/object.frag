@@ -2,7 +2,9 @@
 // occlusion light map multiplied into the diffuse part, where LIGHT_MAP is defined) and 5.4 (a
 // tangent-space normal map, where NORMAL_MAP is defined). Writes the HDR colour and the mask (its second
 // channel: log(delta + L_w), for the tone mapper's log-average option); with
-// DEBUG, also the vectors it shaded with, for the NumPy reference to shade the same pixels.
+// DEBUG, also the vectors it shaded with, for the NumPy reference to shade the same pixels. With
+// SPHERE_IMPOSTOR the fragment ray-casts a sphere through its quad (sphere.vert): the hit's normal, and
+// the hit's depth.
 uniform sampler2D irradiance_map;   // M_1, angle map extended past its rim
 uniform sampler2D reflection_map;   // M_s for this material's exponent
 uniform vec3 kd;
@@ -10,9 +12,17 @@ uniform vec3 ks;
 uniform vec3 eye;                   // camera centre, world
 #ifdef LIGHT_MAP
 uniform sampler2D light_map;
+uniform float light_map_lod;        // its mip level for this object this frame (renderer.py: one level
+                                    // per object is far cheaper on llvmpipe than one per pixel)
 #endif
 #ifdef NORMAL_MAP
 uniform sampler2D normal_map;
+uniform float normal_map_lod;
+#endif
+#ifdef SPHERE_IMPOSTOR
+uniform vec3 center;                // world
+uniform float radius;
+uniform mat4 view_projection;
 #endif
 
 in vec3 v_world;
@@ -55,17 +65,33 @@ vec3 lookup(sampler2D map, vec3 d) {
 }
 
 void main() {
+#ifdef SPHERE_IMPOSTOR
+    vec3 v = normalize(v_world - eye);  // the ray through this pixel
+    vec3 oc = eye - center;
+    float b = dot(v, oc);
+    float disc = b * b - (dot(oc, oc) - radius * radius);
+    if (disc < 0.0) {
+        discard;                    // the quad's corners, outside the outline
+    }
+    vec3 hit = eye + (-b - sqrt(disc)) * v;
+    vec4 clip = view_projection * vec4(hit, 1.0);
+    gl_FragDepth = 0.5 + 0.5 * clip.z / clip.w;  // (the default depth range)
+    vec3 n = (hit - center) / radius;
+#else
     vec3 n = normalize(v_normal);
+#endif
 #ifdef NORMAL_MAP
-    vec3 n_t = texture(normal_map, v_uv).xyz * 2.0 - 1.0;   // eq. 5.2
+    vec3 n_t = textureLod(normal_map, v_uv, normal_map_lod).xyz * 2.0 - 1.0;   // eq. 5.2
     vec3 t = normalize(v_tangent);
     vec3 b = cross(n, t);
     n = normalize(mat3(t, b, n) * n_t);
 #endif
+#ifndef SPHERE_IMPOSTOR
     vec3 v = normalize(v_world - eye);
+#endif
     vec3 light = vec3(1.0);
 #ifdef LIGHT_MAP
-    light = texture(light_map, v_uv2).rgb;
+    light = textureLod(light_map, v_uv2, light_map_lod).rgb;
 #endif
     // Alg. 5.4 line 9 uses the unperturbed n_w here, a typo for n (see render/shading.py).
     vec3 diffuse = lookup(irradiance_map, n) * light;

@@ -10,6 +10,7 @@
 uniform sampler2D hdr;              // the tile: the objects' rectangle in its lower-left corner
 uniform sampler2D mask;
 uniform ivec2 origin;               // the rectangle's corner in the frame (GL window coordinates)
+uniform int frame_height;
 uniform float key;                  // a
 uniform float white;                // L_white
 uniform int top_level;              // the 1 x 1 mip level (the tile is a power of two on each side, zeros
@@ -21,7 +22,9 @@ out vec4 colour;
 const vec3 LUMA = vec3(0.299, 0.587, 0.114);
 
 void main() {
-    vec4 pixel = texelFetch(hdr, ivec2(gl_FragCoord.xy) - origin, 0);
+    // The output's rows run from the image's top; the tile's, as the frame's in GL, from the bottom.
+    ivec2 frame = ivec2(int(gl_FragCoord.x), frame_height - 1 - int(gl_FragCoord.y));
+    vec4 pixel = texelFetch(hdr, frame - origin, 0);
     if (pixel.a < 0.5) {
         discard;                    // the camera image stays
     }
