@@ -76,6 +76,8 @@ def test_render_refuses_bad_input_in_one_line(tmp_path):
     assert_one_line_error(arsim("render", "-o", tmp_path / "out", "--map-size", "0"), "size")
     (tmp_path / "exponent.toml").write_text('[[render.objects]]\nkind = "sphere"\nexponent = 0.0\n')
     assert_one_line_error(arsim("render", tmp_path / "exponent.toml", "-o", tmp_path / "out"), "exponent")
+    (tmp_path / "width.toml").write_text("[device.camera]\nwidth = 0\n")  # a frame resolution of 0
+    assert_one_line_error(arsim("render", tmp_path / "width.toml", "-o", tmp_path / "out"), "width = 0")
     (tmp_path / "size.toml").write_text("[render]\nmap_size = 100\n")
     assert_one_line_error(arsim("render", tmp_path / "size.toml", "-o", tmp_path / "out"), "map_size")
     # a mesh file that cannot be read, one that is not there, and a mesh object without its file
