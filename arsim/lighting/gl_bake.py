@@ -1,0 +1,213 @@
+"""The maps on the GL path (moderngl), tile by tile, as the thesis bakes them inside the frame loop
+(Alg. 4.1/4.2 accurate, with the bounds optimisation as an option; Alg. 4.7 SH maps from a coefficient
+texture): a fragment pass per group of up to eight maps, one colour attachment each, restricted to one
+tile by the thesis's tileOffset and tileScale. The NumPy methods (accurate.py, sh.py) are the oracles.
+
+Fragment passes rather than compute: a tile is a quad in the maps' own framebuffer, which is how the
+thesis bakes them on OpenGL ES 3.0 and what every GL has; on llvmpipe, a compute shader doing the same
+sums measured no faster.
+
+Storage: RGBA32F textures with GL's rows bottom-up, the map's t axis, so that tileOffset (in t) is the
+thesis's; read back with row 0 at the top.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from importlib import resources
+
+import numpy as np
+
+from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
+from arsim.core.gl import create_gl_context
+from arsim.lighting.accurate import Tile, check_inputs, tiles
+from arsim.lighting.phong import phong_zonal_coefficients
+from arsim.lighting.sh import sh_coefficients
+
+MAX_MAPS_PER_PASS = 8  # the colour attachments every GL 4.3 has
+COEFFICIENT_ROW = 1024  # texels per row of the SH coefficient texture
+
+
+def _shader(name: str) -> str:
+    return resources.files("arsim.lighting").joinpath("shaders", name).read_text(encoding="utf-8")
+
+
+def tile_offset_scale(tile: Tile, n: int) -> tuple[tuple[float, float], float]:
+    """The thesis's tileOffset (s, t of the tile's lower-left corner) and tileScale (its side over N)."""
+    return (tile.col0 / n, 1.0 - (tile.row0 + tile.size) / n), tile.size / n
+
+
+class GLBaker:
+    """Maps of an N x N angle map baked on the GL path one tile at a time; read() gives them as
+    (E, N, N, 3) float32 with untouched tiles 0 (black, the thesis's progress display). Subclasses give
+    the fragment shader and what a pass needs."""
+
+    shader = ""
+
+    def __init__(self, env: np.ndarray, exponents: Sequence[float], ctx=None, defines: Sequence[str] = ()):
+        check_inputs(env, exponents)
+        self.ctx = ctx or create_gl_context()
+        self.n = n = env.shape[0]
+        self.exponents = [float(s) for s in exponents]
+        self.inside = anglemap_disk_mask(n)
+        # Output directions computed in float64 and stored in float32: the shaders do no trigonometry to
+        # find them.
+        self.out_dirs = anglemap_directions(n)
+        directions = np.concatenate([self.out_dirs, self.inside[..., None]], axis=-1)[::-1]  # GL rows: t upwards
+        self.directions = self.ctx.texture((n, n), 4, np.ascontiguousarray(directions, dtype="f4").tobytes(), dtype="f4")
+        self.maps = [self.ctx.texture((n, n), 4, dtype="f4") for _ in self.exponents]
+        self.passes = []
+        for start in range(0, len(self.exponents), MAX_MAPS_PER_PASS):
+            group = list(range(start, min(start + MAX_MAPS_PER_PASS, len(self.exponents))))
+            header = "#version 430\n" + "".join(f"#define {d}\n" for d in (f"MAPS {len(group)}", *defines))
+            program = self.ctx.program(vertex_shader="#version 430\n" + _shader("bake_tile.vert"),
+                                       fragment_shader=header + _shader(self.shader))
+            fbo = self.ctx.framebuffer([self.maps[k] for k in group])
+            fbo.clear(0.0, 0.0, 0.0, 0.0)  # untouched tiles stay black
+            self.passes.append((group, program, self.ctx.vertex_array(program, []), fbo))
+        self.resources = [self.directions, *self.maps]
+
+    def _bind(self, group: list[int], program, tile: Tile) -> bool:
+        """Set what this pass over this tile needs; False to skip it."""
+        return True
+
+    def bake_tile(self, tile: Tile) -> None:
+        """Compute every map's texels in the tile."""
+        (s0, t0), scale = tile_offset_scale(tile, self.n)
+        self.directions.use(0)
+        for group, program, vao, fbo in self.passes:
+            if not self._bind(group, program, tile):
+                continue
+            program["directions"].value = 0
+            program["tile_offset"].value, program["tile_scale"].value = (s0, t0), scale
+            fbo.use()
+            fbo.viewport = (0, 0, self.n, self.n)
+            vao.render(vertices=6)
+
+    def bake_all(self, tile_size: int | None = None) -> np.ndarray:
+        for tile in tiles(self.n, tile_size or self.n):
+            self.bake_tile(tile)
+        return self.read()
+
+    def read(self) -> np.ndarray:
+        """(E, N, N, 3) float32, row 0 at the top; texels outside the disk and unbaked tiles 0."""
+        out = np.empty((len(self.maps), self.n, self.n, 3), np.float32)
+        for k, texture in enumerate(self.maps):
+            out[k] = np.frombuffer(texture.read(), dtype=np.float32).reshape(self.n, self.n, 4)[::-1, :, :3]
+        return out
+
+    def release(self) -> None:
+        for obj in self.resources:
+            obj.release()
+        for _, program, vao, fbo in self.passes:
+            vao.release()
+            fbo.release()
+            program.release()
+
+
+class GLAccurateBaker(GLBaker):
+    """Alg. 4.1/4.2: the accurate maps, or with bounds_threshold the bounds-optimised ones (lobe values
+    below it dropped, and only the input texels in the widest kept lobe's cone around the tile visited)."""
+
+    shader = "bake_accurate.frag"
+
+    def __init__(self, env: np.ndarray, exponents: Sequence[float], ctx=None, bounds_threshold: float | None = None):
+        super().__init__(env, exponents, ctx, ["BOUNDS"] if bounds_threshold is not None else [])
+        self.threshold = bounds_threshold
+        weights = anglemap_solid_angles(self.n)[self.inside]
+        self.in_dirs = anglemap_directions(self.n)[self.inside]  # float64, for the bounds candidates
+        probe = np.concatenate([self.in_dirs, weights[:, None]], axis=1).astype("f4")
+        radiance = np.concatenate([env[self.inside, :3].astype(np.float64) * weights[:, None],
+                                   np.zeros((len(weights), 1))], axis=1).astype("f4")
+        self.count = len(weights)
+        self.probe = self.ctx.buffer(probe.tobytes())
+        self.radiance = self.ctx.buffer(radiance.tobytes())
+        self.candidates = self.ctx.buffer(reserve=4)
+        for group, program, _, _ in self.passes:
+            program["exponents"].value = [self.exponents[k] for k in group]
+            if "threshold" in program:
+                program["threshold"].value = bounds_threshold
+        self.resources += [self.probe, self.radiance]
+
+    def _candidates(self, tile: Tile, exponents: Sequence[float]) -> np.ndarray:
+        """Input texels within the cone of the widest lobe kept by the threshold around any of the tile's
+        directions (what accurate.py's bounds method visits, for the pass's smallest exponent)."""
+        rr = slice(tile.row0, tile.row0 + tile.size)
+        cc = slice(tile.col0, tile.col0 + tile.size)
+        block = self.out_dirs[rr, cc][self.inside[rr, cc]]
+        if len(block) == 0:
+            return np.zeros(0, dtype=np.int32)
+        centre = block.mean(axis=0)
+        centre /= np.linalg.norm(centre)
+        spread = float(np.arccos(np.clip(block @ centre, -1.0, 1.0)).max())
+        cone = float(np.arccos(self.threshold ** (1.0 / min(exponents))))
+        return np.flatnonzero(self.in_dirs @ centre >= np.cos(min(np.pi, cone + spread))).astype(np.int32)
+
+    def _bind(self, group: list[int], program, tile: Tile) -> bool:
+        self.probe.bind_to_storage_buffer(0)
+        self.radiance.bind_to_storage_buffer(1)
+        count = self.count
+        if self.threshold is not None:
+            candidates = self._candidates(tile, [self.exponents[k] for k in group])
+            if len(candidates) == 0:
+                return False  # no texel of the tile lies on the disk
+            # A buffer of its own for each list: llvmpipe lets a write into a buffer that queued draws
+            # still read reach them (a tiled bake then mixed the tiles' lists).
+            self.candidates.release()
+            self.candidates = self.ctx.buffer(candidates.tobytes())
+            count = len(candidates)
+        self.candidates.bind_to_storage_buffer(2)
+        program["count"].value = count
+        return True
+
+    def release(self) -> None:
+        self.candidates.release()
+        super().release()
+
+
+class GLShBaker(GLBaker):
+    """Alg. 4.7: SH maps of `order` bands from the coefficients (computed by sh.py unless given), held in
+    a coefficient texture, with the Phong lobe's zonal factors per map in a second texture."""
+
+    shader = "bake_sh.frag"
+
+    def __init__(self, env: np.ndarray, exponents: Sequence[float], order: int, ctx=None, coeffs: np.ndarray | None = None):
+        super().__init__(env, exponents, ctx)
+        self.order = order
+        coeffs = sh_coefficients(env, order) if coeffs is None else coeffs
+        count = order * order
+        rows = -(-count // COEFFICIENT_ROW)
+        texels = np.zeros((rows * COEFFICIENT_ROW, 4), np.float32)
+        texels[:count, :3] = coeffs[:count, :3]
+        self.coefficients = self.ctx.texture((COEFFICIENT_ROW, rows), 4, texels.tobytes(), dtype="f4")
+        self.kappas = []
+        for group, program, _, _ in self.passes:
+            kappa = np.stack([phong_zonal_coefficients(self.exponents[k], order) for k in group]).astype("f4")
+            texture = self.ctx.texture((order, len(group)), 1, np.ascontiguousarray(kappa).tobytes(), dtype="f4")
+            self.kappas.append(texture)
+            program["order"].value = order
+        self.resources += [self.coefficients, *self.kappas]
+
+    def _bind(self, group: list[int], program, tile: Tile) -> bool:
+        self.coefficients.use(1)
+        self.kappas[group[0] // MAX_MAPS_PER_PASS].use(2)
+        program["coefficients"].value, program["kappas"].value = 1, 2
+        return True
+
+
+def gl_accurate_maps(env: np.ndarray, exponents: Sequence[float], tile_size: int | None = None, ctx=None,
+                     bounds_threshold: float | None = None) -> np.ndarray:
+    """The accurate (or bounds) maps baked on the GL path, tile by tile (tile_size None: one tile)."""
+    baker = GLAccurateBaker(env, exponents, ctx, bounds_threshold)
+    maps = baker.bake_all(tile_size)
+    baker.release()
+    return maps
+
+
+def gl_sh_maps(env: np.ndarray, exponents: Sequence[float], order: int, tile_size: int | None = None, ctx=None,
+               coeffs: np.ndarray | None = None) -> np.ndarray:
+    """Alg. 4.7's SH maps baked on the GL path, tile by tile (tile_size None: one tile)."""
+    baker = GLShBaker(env, exponents, order, ctx, coeffs)
+    maps = baker.bake_all(tile_size)
+    baker.release()
+    return maps

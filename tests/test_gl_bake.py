@@ -1,0 +1,84 @@
+"""The maps baked on the GL path against the NumPy oracles (float32 on the GPU against float64): the
+accurate maps, bounds-optimised and not, tiled and untiled; a tile touches only its own texels."""
+
+import numpy as np
+import pytest
+
+from arsim.core.gl import create_gl_context
+from arsim.core.hdr_io import read_hdr
+from arsim.core.resample import to_layout
+from arsim.lighting.accurate import Tile, accurate_maps
+from arsim.lighting.gl_bake import GLAccurateBaker, gl_accurate_maps, tile_offset_scale
+from tests.conftest import ENVMAPS
+
+EXPONENTS = [1, 10, 80, 320, 1280]
+
+
+@pytest.fixture(scope="module")
+def gl():
+    return create_gl_context()
+
+
+@pytest.fixture(scope="module")
+def env():
+    return to_layout(read_hdr(ENVMAPS[1]), "anglemap", 32)
+
+
+def max_relative(test, reference):
+    inside = reference > 0
+    assert (test[~inside] == 0).all()
+    return float((np.abs(test - reference)[inside] / reference[inside]).max())
+
+
+@pytest.mark.parametrize("threshold", [None, 0.03])
+def test_gl_accurate_maps_equal_the_numpy_reference_tiled_and_untiled(gl, env, threshold):
+    reference = accurate_maps(env, EXPONENTS, bounds_threshold=threshold)
+    untiled = gl_accurate_maps(env, EXPONENTS, ctx=gl, bounds_threshold=threshold)
+    tiled = gl_accurate_maps(env, EXPONENTS, tile_size=8, ctx=gl, bounds_threshold=threshold)
+    assert max_relative(untiled, reference) < 1e-3
+    assert max_relative(tiled, reference) < 1e-3
+    np.testing.assert_array_equal(tiled, untiled)  # a texel's sum does not depend on its tile
+
+
+def test_a_tile_bakes_only_its_texels_and_untouched_tiles_stay_black(gl, env):
+    baker = GLAccurateBaker(env, [1, 80], gl)
+    baker.bake_tile(Tile(8, 16, 8))
+    maps = baker.read()
+    baked = np.zeros((32, 32), bool)
+    baked[8:16, 16:24] = True
+    assert (maps[:, ~baked] == 0).all()
+    assert (maps[:, baked] > 0).all()  # this tile lies inside the disk
+    assert tile_offset_scale(Tile(8, 16, 8), 32) == ((0.5, 0.5), 0.25)  # thesis table 4.1's terms
+    baker.release()
+
+
+def test_more_maps_than_attachments_bake_in_several_passes(gl, env):
+    exponents = [1, 2, 5, 10, 20, 40, 80, 160, 320, 640]  # ten: two passes of at most eight
+    reference = accurate_maps(env, exponents)
+    assert max_relative(gl_accurate_maps(env, exponents, ctx=gl), reference) < 1e-3
+
+
+@pytest.mark.parametrize("order", [8, 35])
+def test_gl_sh_maps_equal_the_direct_sh_sum_tiled_and_untiled(gl, env, order):
+    """Alg. 4.7 on the GL path against sh.py's direct float64 sum of the same coefficients. SH maps ring
+    and cross zero, where a relative error means nothing: within 1e-3 relative where the value is at
+    least 1 % of the map's largest, and within 1e-4 of the map's largest everywhere."""
+    from arsim.core.conventions import anglemap_directions, anglemap_disk_mask
+    from arsim.lighting.gl_bake import gl_sh_maps
+    from arsim.lighting.phong import phong_zonal_coefficients
+    from arsim.lighting.sh import sh_coefficients, sh_evaluate
+
+    coeffs = sh_coefficients(env, order)
+    kappas = np.stack([phong_zonal_coefficients(s, order) for s in EXPONENTS])
+    inside = anglemap_disk_mask(32)
+    reference = np.zeros((len(EXPONENTS), 32, 32, 3))
+    reference[:, inside] = sh_evaluate(coeffs, kappas, anglemap_directions(32)[inside])[..., :3]
+    untiled = gl_sh_maps(env, EXPONENTS, order, ctx=gl, coeffs=coeffs)
+    tiled = gl_sh_maps(env, EXPONENTS, order, tile_size=8, ctx=gl, coeffs=coeffs)
+    np.testing.assert_array_equal(tiled, untiled)
+    scale = np.abs(reference).max(axis=(1, 2, 3), keepdims=True)
+    large = np.abs(reference) >= 0.01 * scale
+    assert large.sum() > 0.4 * len(EXPONENTS) * inside.sum() * 3
+    assert (np.abs(untiled - reference)[large] / np.abs(reference)[large]).max() < 1e-3
+    assert (np.abs(untiled - reference) / scale).max() < 1e-4
+    assert (untiled[:, ~inside] == 0).all()
