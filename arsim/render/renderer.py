@@ -352,31 +352,51 @@ class Renderer:
         vao.release()
         vbo.release()
 
-    def overlay_pass(self, lines: Sequence[str]) -> None:
+    def overlay_pass(self, lines: Sequence[str], thumbnail=None) -> None:
         """Step 7: the user interface, lines of text (frame time, bake progress) in a translucent box at
-        the frame's top left, blended over the output."""
+        the frame's top left, blended over the output; below it, optionally, a thumbnail of an HDR
+        angle-map texture (the map being baked: the thesis's progress display, black where no tile is
+        done yet), its rows bottom-up (t upwards)."""
         image = overlay_image(lines, self.camera.height)
         h, w = image.shape[:2]
         if self.overlay_program is None:
-            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("overlay.frag", []))
-            self.overlay_program = (program, self.ctx.vertex_array(program, []), {})
-        program, vao, textures = self.overlay_program
+            programs = {}
+            for name, defines in (("text", []), ("thumbnail", ["THUMBNAIL"])):
+                program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("overlay.frag", defines))
+                programs[name] = (program, self.ctx.vertex_array(program, []))
+            self.overlay_program = (programs, {})
+        programs, textures = self.overlay_program
         if (w, h) not in textures:
             textures[(w, h)] = self.ctx.texture((w, h), 4, dtype="f1")
             textures[(w, h)].filter = self.ctx.NEAREST, self.ctx.NEAREST
         texture = textures[(w, h)]
         texture.write(np.ascontiguousarray(image))  # (the output's rows run from the top: no flip)
-        texture.use(0)
-        program["text"].value = 0
         margin = max(self.camera.height // 90, 2)
         self.overlay_box = np.s_[margin:margin + h, margin:margin + w]  # in the image, row 0 at the top
         self.output_fbo.use()
-        self.output_fbo.viewport = (margin, margin, w, h)
         self.ctx.enable(self.ctx.BLEND)
         self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
+        program, vao = programs["text"]
+        texture.use(0)
+        program["image"].value = 0
+        self.output_fbo.viewport = (margin, margin, w, h)
         vao.render(vertices=3)
         self.ctx.disable(self.ctx.BLEND)
+        if thumbnail is not None:
+            side = min(self.camera.height // 4, self.camera.width // 4)
+            program, vao = programs["thumbnail"]
+            thumbnail.use(0)
+            program["image"].value = 0
+            self.output_fbo.viewport = (margin, 2 * margin + h, side, side)
+            vao.render(vertices=3)
+            self.overlay_box = np.s_[margin:2 * margin + h + side, margin:margin + max(w, side)]
         self.output_fbo.viewport = (0, 0, self.camera.width, self.camera.height)
+
+    def update_map(self, method: str, exponent: float, anglemap: np.ndarray) -> None:
+        """Replace a map in place (the objects that read it see the new one from the next frame): how the
+        baked maps take over from the ones used while they were baked. Same size as the one it replaces."""
+        data = np.ascontiguousarray(extend_beyond_rim(anglemap).astype(np.float32))
+        self.maps[method or self.default_method, float(exponent)].write(data.tobytes())
 
     def _read(self, texture, components: int, dtype: str, level: int = 0) -> np.ndarray:
         """A tile texture's level as an image; level 0 placed into the frame (zeros around the objects'

@@ -26,12 +26,12 @@ from arsim.core.png import png_bytes
 from arsim.evaluate.recording_plots import recording_camera
 from arsim.evaluate.tracking import TrackingRun, measure_poses
 from arsim.lighting.methods import bake
+from arsim.render.loop import GL_STEPS, FrameLoop, Shading
 from arsim.render.renderer import Renderer, SceneObject
 from arsim.sensors.recording import Recording
 from arsim.tracking.apriltag import TagTracker
 
 STEPS = ("track", "background", "objects", "tone_mapping", "overlay", "readback", "truth_frame")
-GL_STEPS = ("background", "objects", "tone_mapping", "overlay")
 
 
 @dataclass(frozen=True)
@@ -129,55 +129,35 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
     (out_dir / "frames").mkdir(parents=True, exist_ok=True)
     step_ms = {name: [] for name in STEPS}
     gl_ms = {name: [] for name in GL_STEPS}
-    query = ctx.query(time=True)
     poses, flips = [], np.full(count, np.nan)
     fps = rec.meta["camera"].get("fps", 30.0) / settings.every
-    last_frame_ms = 0.0
-
-    def timed(name: str, work: Callable[[], None]) -> None:
-        ctx.finish()
-        start = time.perf_counter()
-        with query:
-            work()
-        ctx.finish()
-        step_ms[name].append(1000 * (time.perf_counter() - start))
-        gl_ms[name].append(query.elapsed / 1e6)
-
+    shading = Shading(settings.key, settings.white, settings.log_average)
+    loop = FrameLoop(ctx, tracker, captured, shading, settings.overlay, settings.method)
     with atomic_path(out_dir / "session.mp4") as video_path:
         video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
         for n, k in enumerate(indices):
             frame = read_frame(rec.folder / rec.frames[k]["file"])
-            start = time.perf_counter()
-            pose = tracker.track(frame)
-            step_ms["track"].append(1000 * (time.perf_counter() - start))
+            pose, record = loop.run(frame, int(k))
             poses.append(pose)
-            rotation = Rotation.from_matrix(pose.rotation) if pose.found else None
-            timed("background", lambda: captured.background_pass(frame))
-            if pose.found:  # lost frames draw no object (as the thesis's app)
-                timed("objects", lambda: captured.render_objects(rotation, pose.translation))
-                timed("tone_mapping", lambda: captured.tonemap_pass(settings.key, settings.white, settings.log_average))
-            else:
-                captured.no_objects()
-            overlay_box = None
-            if settings.overlay:
-                lines = [f"frame {k}  {last_frame_ms:5.1f} ms", f"maps: {settings.method}" if pose.found else "tag lost"]
-                timed("overlay", lambda: captured.overlay_pass(lines))
-                overlay_box = captured.overlay_box
-            last_frame_ms = sum(step_ms[name][-1] for name in ("track", *GL_STEPS) if step_ms[name]
-                                and (name in ("track", "background", "overlay") or pose.found))
+            for name, ms in record.cpu_ms.items():
+                step_ms[name].append(ms)
+            for name, ms in record.gl_ms.items():
+                gl_ms[name].append(ms)
+            overlay_box = captured.overlay_box if settings.overlay else None
             start = time.perf_counter()
             out = captured.read_output()
             mask = captured.read_mask() > 0.5
             step_ms["readback"].append(1000 * (time.perf_counter() - start))
             if pose.found:
                 start = time.perf_counter()
-                true_light.render_objects(rotation, pose.translation)
+                true_light.render_objects(Rotation.from_matrix(pose.rotation), pose.translation)
                 true_light.background_pass(frame)
                 true_light.tonemap_pass(settings.key, settings.white, settings.log_average)
-                if overlay_box is not None:  # the same overlay on both (FLIP's filters reach past its box), and
-                    true_light.overlay_pass(lines)  # its pixels left out: they are not the objects' light
-                    mask[overlay_box] = False
                 truth_frame = true_light.read_output()
+                if overlay_box is not None:  # the same overlay pixels on both (FLIP's filters reach past its
+                    truth_frame = truth_frame.copy()  # box), and those pixels left out: not the objects' light
+                    truth_frame[overlay_box] = out[overlay_box]
+                    mask[overlay_box] = False
                 flips[n] = masked_flip(truth_frame, out, mask) if mask.any() else np.nan
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
             video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))

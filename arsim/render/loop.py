@@ -1,0 +1,124 @@
+"""The render loop of thesis 5.1, one camera frame at a time: the tag's pose (steps 1-2), a few tiles of
+the maps being baked (3), the camera frame as the background (4), the virtual objects into the HDR colour
+and the mask (5), the masked tone mapping (6) and the overlay (7). Every step is timed on the CPU around
+glFinish and, for the GL ones, with a timer query; the records are what the profiler reads.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from arsim.render.baking import LoopBaker
+from arsim.render.renderer import Renderer
+from arsim.tracking.apriltag import TagPose, TagTracker
+
+LOOP_STEPS = ("track", "bake", "background", "objects", "tone_mapping", "overlay")  # steps 1-2, 3, 4, 5, 6, 7
+GL_STEPS = ("bake", "background", "objects", "tone_mapping", "overlay")
+BUDGET_MARGIN = 0.05  # the share of the budget the bake leaves free: the other steps vary
+
+
+@dataclass(frozen=True)
+class Shading:
+    key: float = 0.18  # Reinhard's a
+    white: float = 2.0  # L_white
+    log_average: bool = False
+
+
+@dataclass
+class FrameRecord:
+    index: int  # the camera frame's index in the recording
+    start_ms: float  # since the loop's first frame began
+    cpu_ms: dict[str, float] = field(default_factory=dict)  # per step that ran
+    gl_ms: dict[str, float] = field(default_factory=dict)
+    step_start_ms: dict[str, float] = field(default_factory=dict)
+    found: bool = False
+    bake_tiles: int = 0
+    bake_progress: float = 1.0  # after this frame
+
+    @property
+    def total_ms(self) -> float:
+        return sum(self.cpu_ms.values())
+
+
+class FrameLoop:
+    """Runs the render loop's steps on frames; `baker` (optional) bakes within `budget_ms` per frame and
+    hands its maps to the renderer when done."""
+
+    def __init__(self, ctx, tracker: TagTracker, renderer: Renderer, shading: Shading = Shading(), overlay: bool = False,
+                 maps_label: str = "", baker: LoopBaker | None = None, budget_ms: float = 33.3):
+        self.ctx, self.tracker, self.renderer, self.shading = ctx, tracker, renderer, shading
+        self.overlay, self.maps_label, self.baker, self.budget_ms = overlay, maps_label, baker, budget_ms
+        self.query = ctx.query(time=True)
+        self.origin = None
+        self.last_frame_ms = 0.0
+        self.recent_rest: deque[float] = deque(maxlen=30)  # steps 4-7 of recent frames, CPU ms
+        self.baked_in_use = False
+
+    def _timed(self, record: FrameRecord, name: str, work: Callable[[], None], gl: bool = True) -> None:
+        self.ctx.finish()
+        start = time.perf_counter()
+        record.step_start_ms[name] = 1000 * (start - self.origin)
+        if gl:
+            with self.query:
+                work()
+            self.ctx.finish()
+            record.gl_ms[name] = self.query.elapsed / 1e6
+        else:
+            work()
+        record.cpu_ms[name] = 1000 * (time.perf_counter() - start)
+
+    def _bake(self, record: FrameRecord) -> None:
+        rest = float(np.percentile(self.recent_rest, 90)) if self.recent_rest else 0.0
+        available = self.budget_ms * (1 - BUDGET_MARGIN) - record.cpu_ms["track"] - rest
+        record.bake_tiles = self.baker.step(available)
+        if self.baker.done and not self.baked_in_use:  # the app switches to the baked maps
+            for exponent, anglemap in zip(self.baker.exponents, self.baker.maps()):
+                self.renderer.update_map("", exponent, anglemap)
+            self.baked_in_use = True
+
+    def run(self, frame: np.ndarray, index: int) -> tuple[TagPose, FrameRecord]:
+        now = time.perf_counter()
+        if self.origin is None:
+            self.origin = now
+        record = FrameRecord(index, 1000 * (now - self.origin))
+        pose = None
+
+        def track():
+            nonlocal pose
+            pose = self.tracker.track(frame)
+
+        self._timed(record, "track", track, gl=False)
+        record.found = pose.found
+        if self.baker is not None and not self.baked_in_use:
+            self._timed(record, "bake", lambda: self._bake(record))
+            record.bake_progress = self.baker.progress
+        r = self.renderer
+        self._timed(record, "background", lambda: r.background_pass(frame))
+        if pose.found:  # lost frames draw no object (as the thesis's app)
+            rotation = Rotation.from_matrix(pose.rotation)
+            self._timed(record, "objects", lambda: r.render_objects(rotation, pose.translation))
+            self._timed(record, "tone_mapping", lambda: r.tonemap_pass(self.shading.key, self.shading.white, self.shading.log_average))
+        else:
+            r.no_objects()
+        if self.overlay:
+            lines = [f"frame {index}  {self.last_frame_ms:5.1f} ms", self.status_line(pose.found)]
+            baking = self.baker is not None and not self.baked_in_use
+            self._timed(record, "overlay", lambda: r.overlay_pass(lines, self.baker.thumbnail if baking else None))
+        self.recent_rest.append(sum(record.cpu_ms.get(name, 0.0) for name in GL_STEPS if name != "bake"))
+        self.last_frame_ms = record.total_ms
+        return pose, record
+
+    def status_line(self, found: bool) -> str:
+        if not found:
+            return "tag lost"
+        if self.baker is None:
+            return f"maps: {self.maps_label}"
+        if self.baked_in_use:
+            return f"maps: {self.baker.settings.method} (baked)"
+        return f"maps: {self.maps_label}; baking {self.baker.settings.method} {100 * self.baker.progress:.0f} %"
