@@ -248,6 +248,83 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _tile_policy(text: str) -> int | None:
+    """--tile and [profile] tile: a tile side, or auto (None)."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise ArsimError(f"tile policy {text!r} is neither a tile side nor auto; give e.g. 64 or auto") from None
+    if value < 1:
+        raise ArsimError(f"tile side {value} is not positive; give e.g. 64 or auto")
+    return value
+
+
+def cmd_profile(args: argparse.Namespace) -> int:
+
+    from arsim.capture.pipeline import CaptureSettings, burst_response, capture
+    from arsim.evaluate.capture_report import filled
+    from arsim.evaluate.profile import sweep_table, write_profile
+    from arsim.render.baking import BakeSettings
+    from arsim.render.content import scene_objects
+    from arsim.render.session import SessionSettings, run_profile
+
+    scenario = load_scenario(args.scenario)
+    if not scenario.ar.enabled:
+        raise ArsimError(f"{args.scenario or 'the scenario'}: [ar] enabled = false; the profile needs the AR path: set it to true")
+    recording_segments(scenario)
+    r, pr = scenario.render, scenario.profile
+    map_size = args.map_size or r.map_size
+    if not _is_map_size(map_size):
+        raise ArsimError(f"[render] map_size {map_size} is not a power of two from 8 up: give 64, 128, 256, ...")
+    budget = args.budget_ms if args.budget_ms is not None else pr.budget_ms
+    if args.sweep is not None:
+        entries = [e for e in args.sweep.split(",") if e.strip()]
+        if not entries:
+            raise ArsimError("--sweep has no entries; give tile policies, e.g. --sweep 32,64,128,auto")
+        policies = [_tile_policy(e) for e in entries]
+    else:
+        policies = [_tile_policy(args.tile if args.tile is not None else pr.tile)]
+    method = args.bake or pr.bake
+    bakes = [BakeSettings(method, tile) for tile in policies]
+    for b in bakes:
+        b.check(map_size)  # a tile that does not divide the maps fails here, before any work
+    objects = scene_objects(r)
+    out = _output_dir(args.output)
+    probe = _probe(args.env, map_size) if args.env is not None else None
+    with progress_bar("recording the sweep and the AR path", 1.0) as update:
+        record(scenario, out / "recording", progress=lambda f: update(completed=f))
+    sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
+    if probe is None:
+        with progress_bar("capturing the light probe", 1.0) as update:
+            result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
+        probe = to_layout(filled(result.accumulator.probe(), result.accumulator.covered()), "anglemap", map_size)
+        response = result.response
+    else:
+        from arsim.sensors.camera import SensorSettings
+
+        response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
+    settings = SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True)
+    runs = []
+    for b in bakes:
+        with progress_bar(f"baking {method} maps in the loop, tile {b.label}", 1.0) as update:
+            runs.append(run_profile(ar, response.linear[:, 1], probe, objects, b, budget, args.max_frames or pr.max_frames,
+                                    out / (f"tile_{b.label}" if len(bakes) > 1 else "."), settings,
+                                    progress=lambda f: update(completed=f)))
+    write_profile(runs, out)
+    for run in runs:
+        s = run.summary()
+        bake = s["bake"]
+        state = (f"bake complete after {bake['frames_to_finish']} frames ({bake['seconds']:.1f} s), worst frame "
+                 f"{bake['worst_frame_ms']:.1f} ms" if bake["completed"] else "bake not complete")
+        print(f"tile {run.label}: {s['frames']} frames, {s['within_budget_pct']:.2f} % within {budget:.1f} ms; {state}")
+    if len(runs) > 1:
+        print(sweep_table(runs))
+    print(f"profile in {out / 'profile.md'}, trace(s) for Perfetto or chrome://tracing, timeline plot(s)")
+    return 0
+
+
 # --------------------------------------------------------------------------------------------------
 # arsim convert
 
@@ -485,6 +562,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overlay", action=argparse.BooleanOptionalAction,
                    help="draw the overlay: frame time and map state (default: [render] overlay, off)")
     p.set_defaults(run=cmd_render)
+
+    p = _command(sub, "profile", "profile the render loop while it bakes maps tile by tile (thesis 5.1 step 3): per step and frame "
+                 "CPU and GL time against a frame budget, a Chrome trace (Perfetto), a timeline plot and profile.md; "
+                 "--sweep compares tile policies (the thesis's table 6.6)",
+                 "arsim profile -o prof --tile auto   (or: arsim profile scenarios/indoor.toml -o prof --sweep 32,64,128,auto)")
+    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
+                   help="scenario .toml (default: the embedded default scenario)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("--env", type=Path, metavar="PROBE.exr", help="bake from this environment instead of the captured probe")
+    p.add_argument("--budget-ms", type=_positive("--budget-ms", float), metavar="X",
+                   help="frame budget in ms (default: [profile] budget_ms, 33.3)")
+    p.add_argument("--tile", metavar="N|auto", help="tile side baked per frame, or auto (default: [profile] tile, auto)")
+    p.add_argument("--sweep", metavar="LIST", help="run each tile policy, e.g. 32,64,128,auto, and tabulate them")
+    p.add_argument("--bake", choices=("accurate", "bounds", "sh"), help="method of the maps baked (default: [profile] bake, accurate)")
+    p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
+    p.add_argument("--max-frames", type=_positive("--max-frames"), metavar="K",
+                   help="stop after K frames even if the bake is not complete (default: [profile] max_frames)")
+    p.set_defaults(run=cmd_profile)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")

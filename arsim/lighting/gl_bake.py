@@ -56,6 +56,8 @@ class GLBaker:
         directions = np.concatenate([self.out_dirs, self.inside[..., None]], axis=-1)[::-1]  # GL rows: t upwards
         self.directions = self.ctx.texture((n, n), 4, np.ascontiguousarray(directions, dtype="f4").tobytes(), dtype="f4")
         self.maps = [self.ctx.texture((n, n), 4, dtype="f4") for _ in self.exponents]
+        for texture in self.maps:  # (shown filtered in the progress display: no wrapping at its edges)
+            texture.repeat_x = texture.repeat_y = False
         self.passes = []
         for start in range(0, len(self.exponents), MAX_MAPS_PER_PASS):
             group = list(range(start, min(start + MAX_MAPS_PER_PASS, len(self.exponents))))
@@ -147,7 +149,9 @@ class GLAccurateBaker(GLBaker):
         self.probe.bind_to_storage_buffer(0)
         self.radiance.bind_to_storage_buffer(1)
         count = self.count
-        if self.threshold is not None:
+        if tile.size == 0:  # an empty tile (a warm-up draw: the shader compiled, nothing summed)
+            count = 0
+        elif self.threshold is not None:
             candidates = self._candidates(tile, [self.exponents[k] for k in group])
             if len(candidates) == 0:
                 return False  # no texel of the tile lies on the disk

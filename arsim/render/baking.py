@@ -13,12 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from arsim.core.errors import ArsimError
-from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, tiles
+from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, Tile, tiles
 from arsim.lighting.gl_bake import GLAccurateBaker, GLShBaker
 
 BAKE_METHODS = ("accurate", "bounds", "sh")
-AUTO_UNIT = 16  # the tile side `auto` schedules in (or the map's side, if smaller)
+AUTO_UNIT = 16  # the tile side `auto` schedules in (or the map's side), split into quadrants where needed
+AUTO_FIRST = 4  # the side of auto's first tile, which measures the GL time per unit of work
 AUTO_SAFETY = 1.25  # predicted cost x this must fit: GL time per unit of work varies from tile to tile
+TILE_OVERHEAD_MS = 0.1  # GL time a tile's passes cost whatever their size (measured on llvmpipe: 0.05-0.1)
 AUTO_STALL_FRAMES = 30  # after this many frames without room for a tile, bake one anyway (the bake must end)
 
 
@@ -54,11 +56,17 @@ class LoopBaker:
             threshold = settings.bounds_threshold if settings.method == "bounds" else None
             self.gl = GLAccurateBaker(probe, self.exponents, ctx, threshold)
         self.queue = deque(tiles(n, settings.tile or min(AUTO_UNIT, n)))
-        self.total = len(self.queue)
+        self.texels_total, self.texels_done = int(self.gl.inside.sum()), 0
         self.query = ctx.query(time=True)
         self.cost_per_work: deque[float] = deque(maxlen=8)  # measured GL ms per unit of work, recent tiles
         self.idle_frames = 0
         self.gl_ms_total = 0.0
+        self.last_gl_ms = 0.0  # the GL time of the last step's tiles
+        self.works: dict = {}
+
+    def warm_up(self) -> None:
+        """Draw the bake passes over an empty tile: their shaders' machine code is compiled then."""
+        self.gl.bake_tile(Tile(0, 0, 0))
 
     @property
     def done(self) -> bool:
@@ -66,54 +74,82 @@ class LoopBaker:
 
     @property
     def progress(self) -> float:
-        return 1.0 - len(self.queue) / self.total
+        """The share of the disk's texels baked."""
+        return 1.0 if self.done else self.texels_done / self.texels_total
+
+    def _texels(self, tile) -> int:
+        return int(self.gl.inside[tile.row0:tile.row0 + tile.size, tile.col0:tile.col0 + tile.size].sum())
 
     def _work(self, tile) -> float:
         """A tile's work in units the GL time is proportional to: its disk texels, times the input texels
         each visits (accurate), the tile's candidates (bounds), or the SH terms (sh)."""
-        rr, cc = slice(tile.row0, tile.row0 + tile.size), slice(tile.col0, tile.col0 + tile.size)
-        texels = float(self.gl.inside[rr, cc].sum())
+        if tile not in self.works:
+            self.works[tile] = self._count_work(tile)
+        return self.works[tile]
+
+    def _count_work(self, tile) -> float:
+        texels = float(self._texels(tile))
         if isinstance(self.gl, GLShBaker):
             return texels * self.gl.order ** 2
         if self.gl.threshold is not None:
             return texels * len(self.gl._candidates(tile, [min(self.exponents)]))
         return texels * self.gl.count
 
+    def _split(self) -> None:
+        """Replace the head of the queue by its four quadrants (row by row, as the thesis's order)."""
+        tile = self.queue.popleft()
+        half = tile.size // 2
+        for quadrant in reversed([Tile(tile.row0 + dr, tile.col0 + dc, half) for dr in (0, half) for dc in (0, half)]):
+            self.queue.appendleft(quadrant)
+
+    def _auto_batch(self, available_ms: float) -> list:
+        """The tiles predicted to fit: from the head of the queue, splitting the head into quadrants
+        while even it alone would not fit (down to single texels), so that the work per frame follows
+        the time left however costly a texel is."""
+        batch, spent = [], 0.0
+        if not self.cost_per_work:  # nothing measured yet: a small tile, to measure
+            while self.queue[0].size > AUTO_FIRST:
+                self._split()
+            return [self.queue.popleft()]
+        cost = max(self.cost_per_work) * AUTO_SAFETY
+        while self.queue:
+            predicted = self._work(self.queue[0]) * cost + TILE_OVERHEAD_MS
+            if spent + predicted <= available_ms:
+                batch.append(self.queue.popleft())
+                spent += predicted
+            elif not batch and self.queue[0].size > 1:
+                self._split()
+            else:
+                break
+        return batch
+
     def step(self, available_ms: float) -> int:
-        """Bake the next tile (fixed size), or as many as are predicted to fit in available_ms (auto);
-        returns how many."""
+        """Bake the next tile (fixed size), or the tiles predicted to fit in available_ms (auto); returns
+        how many."""
+        self.last_gl_ms = 0.0
         if self.done:
             return 0
-        batch = [self.queue[0]]
         if self.settings.tile is None:
-            batch = []
-            cost = max(self.cost_per_work) * AUTO_SAFETY if self.cost_per_work else None
-            spent = 0.0
-            for tile in list(self.queue):
-                predicted = 0.0 if cost is None else self._work(tile) * cost
-                if cost is not None and spent + predicted > available_ms:
-                    break
-                batch.append(tile)
-                spent += predicted
-                if cost is None:
-                    break  # nothing measured yet: one tile, to measure
+            batch = self._auto_batch(available_ms)
             if not batch:
                 self.idle_frames += 1
                 if self.idle_frames < AUTO_STALL_FRAMES:
                     return 0
-                batch = [self.queue[0]]
+                batch = [self.queue.popleft()]  # (a single texel by now: the bake must end)
             self.idle_frames = 0
+        else:
+            batch = [self.queue.popleft()]
         with self.query:
             for tile in batch:
                 self.gl.bake_tile(tile)
         self.ctx.finish()
         elapsed = self.query.elapsed / 1e6
+        self.last_gl_ms = elapsed
         self.gl_ms_total += elapsed
         work = sum(self._work(tile) for tile in batch)
         if work > 0:
-            self.cost_per_work.append(elapsed / work)
-        for _ in batch:
-            self.queue.popleft()
+            self.cost_per_work.append(max(elapsed - TILE_OVERHEAD_MS * len(batch), 0.0) / work)
+        self.texels_done += sum(self._texels(tile) for tile in batch)
         return len(batch)
 
     def maps(self) -> np.ndarray:

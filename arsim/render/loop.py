@@ -40,6 +40,7 @@ class FrameRecord:
     found: bool = False
     bake_tiles: int = 0
     bake_progress: float = 1.0  # after this frame
+    bake_done: bool = False  # the bake's last tile was done in this frame
 
     @property
     def total_ms(self) -> float:
@@ -51,8 +52,10 @@ class FrameLoop:
     hands its maps to the renderer when done."""
 
     def __init__(self, ctx, tracker: TagTracker, renderer: Renderer, shading: Shading = Shading(), overlay: bool = False,
-                 maps_label: str = "", baker: LoopBaker | None = None, budget_ms: float = 33.3):
+                 maps_label: str = "", baker: LoopBaker | None = None, budget_ms: float = 33.3,
+                 pose_cache: dict[int, TagPose] | None = None):
         self.ctx, self.tracker, self.renderer, self.shading = ctx, tracker, renderer, shading
+        self.pose_cache = pose_cache  # a recording's frames seen again (a loop over its path): their poses
         self.overlay, self.maps_label, self.baker, self.budget_ms = overlay, maps_label, baker, budget_ms
         self.query = ctx.query(time=True)
         self.origin = None
@@ -75,12 +78,33 @@ class FrameLoop:
 
     def _bake(self, record: FrameRecord) -> None:
         rest = float(np.percentile(self.recent_rest, 90)) if self.recent_rest else 0.0
-        available = self.budget_ms * (1 - BUDGET_MARGIN) - record.cpu_ms["track"] - rest
+        # The tracker works on the camera's thread (as Vuforia in the thesis's app): only steps 3-7 share
+        # the render thread's budget.
+        available = self.budget_ms * (1 - BUDGET_MARGIN) - rest
         record.bake_tiles = self.baker.step(available)
+        record.bake_done = self.baker.done
         if self.baker.done and not self.baked_in_use:  # the app switches to the baked maps
             for exponent, anglemap in zip(self.baker.exponents, self.baker.maps()):
                 self.renderer.update_map("", exponent, anglemap)
             self.baked_in_use = True
+
+    def warm_up(self, frame: np.ndarray, index: int) -> None:
+        """Run every pass once, unrecorded, as an app does while it loads: llvmpipe compiles a shader's
+        machine code at its first draw (up to 100 ms), which would otherwise land in the first frames."""
+        pose = self.pose_cache.get(index) if self.pose_cache is not None else None
+        if pose is None:
+            pose = self.tracker.track(frame)
+            if self.pose_cache is not None:
+                self.pose_cache[index] = pose
+        if self.baker is not None:
+            self.baker.warm_up()
+        self.renderer.background_pass(frame)
+        if pose.found:
+            self.renderer.render_objects(Rotation.from_matrix(pose.rotation), pose.translation)
+            self.renderer.tonemap_pass(self.shading.key, self.shading.white, self.shading.log_average)
+        if self.overlay:
+            self.renderer.overlay_pass(["warming up"], self.baker.thumbnail if self.baker is not None else None)
+        self.ctx.finish()
 
     def run(self, frame: np.ndarray, index: int) -> tuple[TagPose, FrameRecord]:
         now = time.perf_counter()
@@ -93,10 +117,17 @@ class FrameLoop:
             nonlocal pose
             pose = self.tracker.track(frame)
 
-        self._timed(record, "track", track, gl=False)
+        if self.pose_cache is not None and index in self.pose_cache:
+            pose = self.pose_cache[index]
+        else:
+            self._timed(record, "track", track, gl=False)
+            if self.pose_cache is not None:
+                self.pose_cache[index] = pose
         record.found = pose.found
         if self.baker is not None and not self.baked_in_use:
-            self._timed(record, "bake", lambda: self._bake(record))
+            # (timed on the CPU here; the baker times its own GL work: timer queries cannot nest)
+            self._timed(record, "bake", lambda: self._bake(record), gl=False)
+            record.gl_ms["bake"] = self.baker.last_gl_ms
             record.bake_progress = self.baker.progress
         r = self.renderer
         self._timed(record, "background", lambda: r.background_pass(frame))

@@ -143,15 +143,15 @@ def _power_of_two(n: int, least: int = 16) -> int:
 class Renderer:
     """Renders virtual objects lit by angle maps: maps[method][1.0] the irradiance map, maps[method][s]
     the reflection map for exponent s > 1; a material takes its method's maps. One method's maps may be
-    given as they are ({1.0: ..., 80.0: ...}: the method ""). Materials that name no method take
-    `method` (default: the first in maps)."""
+    given as they are ({1.0: ..., 80.0: ...}: they are `method`'s, or the method ""). Materials that
+    name no method take `method` (default: the first in maps)."""
 
     def __init__(self, camera: CameraIntrinsics, maps: dict, ctx=None, debug: bool = False,
                  near: float = 0.02, far: float = 50.0, method: str | None = None):
         self.ctx = ctx or create_gl_context()
         self.camera, self.debug, self.near = camera, debug, near
         self.projection = gl_projection_from_intrinsics(camera, near, far)
-        by_method = maps if all(isinstance(k, str) for k in maps) else {"": maps}
+        by_method = maps if all(isinstance(k, str) for k in maps) else {method or "": maps}
         self.maps = {(name, float(s)): self._map_texture(m) for name, ms in by_method.items() for s, m in ms.items()}
         self.default_method = next(iter(by_method)) if method is None else method
         self.objects: list[_Drawable] = []

@@ -26,6 +26,8 @@ from arsim.core.png import png_bytes
 from arsim.evaluate.recording_plots import recording_camera
 from arsim.evaluate.tracking import TrackingRun, measure_poses
 from arsim.lighting.methods import bake
+from arsim.evaluate.profile import ProfileRun
+from arsim.render.baking import BakeSettings, LoopBaker
 from arsim.render.loop import GL_STEPS, FrameLoop, Shading
 from arsim.render.renderer import Renderer, SceneObject
 from arsim.sensors.recording import Recording
@@ -167,3 +169,46 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
                 progress((n + 1) / count)
         video.release()
     return SessionResult(measure_poses(rec, poses, indices), indices, flips, step_ms, gl_ms)
+
+
+def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, objects: list[SceneObject],
+                bake: BakeSettings, budget_ms: float, max_frames: int, out_dir: Path | None = None,
+                settings: SessionSettings = SessionSettings(method="mipmap", overlay=True), tail_frames: int = 30,
+                progress: Callable[[float], None] = lambda fraction: None) -> ProfileRun:
+    """The render loop over the AR path's frames, again and again, while step 3 bakes the objects' maps
+    from `probe` with `bake` (the objects lit by `settings.method` maps meanwhile), until the bake is
+    complete and tail_frames more, or max_frames. The tracker runs once per recorded frame (its pose is
+    kept for the next lap). With out_dir, frames at a quarter and half of the bake and after it go to
+    out_dir/frames (the progress display)."""
+    ctx = create_gl_context()
+    camera = recording_camera(rec)
+    table = rec.meta["table"]
+    tracker = TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+    needed = maps_needed(objects, settings.method)
+    renderer = Renderer(camera, session_maps(probe, needed), ctx, method=settings.method)
+    for obj in objects:
+        renderer.add(obj)
+    baker = LoopBaker(probe, needed[settings.method], bake, ctx)
+    loop = FrameLoop(ctx, tracker, renderer, Shading(settings.key, settings.white, settings.log_average), settings.overlay,
+                     settings.method, baker, budget_ms, pose_cache={})
+    marks = [0.25, 0.5, 1.0]
+    if out_dir is not None:
+        (out_dir / "frames").mkdir(parents=True, exist_ok=True)
+    loop.warm_up(read_frame(rec.folder / rec.frames[0]["file"]), 0)
+    records, after = [], 0
+    for n in range(max_frames):
+        k = n % len(rec.frames)
+        frame = read_frame(rec.folder / rec.frames[k]["file"])
+        _, record = loop.run(frame, k)
+        records.append(record)
+        if out_dir is not None and marks and (loop.baked_in_use if marks[0] >= 1.0 else baker.progress >= marks[0]):
+            name = f"bake_{int(100 * marks.pop(0)):03d}pct_frame{n:06d}.png"
+            write_bytes_atomic(out_dir / "frames" / name, png_bytes(renderer.read_output()))
+        after += loop.baked_in_use
+        if after > tail_frames:
+            break
+        if n % 20 == 0:
+            progress(baker.progress)
+    progress(1.0)
+    baker.release()
+    return ProfileRun(bake.label, bake.method, budget_ms, records)

@@ -213,6 +213,17 @@ class RenderSection:
 
 
 @dataclass(frozen=True)
+class ProfileSection:
+    """[profile]: the render loop profiled while it bakes maps tile by tile (`arsim profile`)."""
+
+    budget_ms: float = setting(33.3, min=0.001, max=10000.0, unit="ms", help="frame budget (30 frames/s: 33.3)")
+    tile: str = setting("auto", help="tile side baked per frame (a divisor of [render] map_size, e.g. \"64\"), or \"auto\"")
+    bake: str = setting("accurate", choices=("accurate", "bounds", "sh"), help="the method of the maps baked in the loop")
+    max_frames: int = setting(20000, min=1, max=10_000_000, unit="frames",
+                              help="stop after this many frames even if the bake is not complete")
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A whole scenario: one field per TOML section, each a checked, frozen dataclass."""
 
@@ -222,3 +233,4 @@ class Scenario:
     capture: CaptureSection = subsection(CaptureSection, help="the capture sweep")
     ar: ArSection = subsection(ArSection, help="the AR session's path, tag and table")
     render: RenderSection = subsection(RenderSection, help="the AR session's renderer and virtual objects")
+    profile: ProfileSection = subsection(ProfileSection, help="the render loop's profile while baking")

@@ -1,0 +1,174 @@
+"""Frame-budget profiling of the render loop: per frame and per step, CPU and GL time; the budget and
+its misses; p50/p95/p99/max per step; a Chrome trace-event JSON (one track per step, for Perfetto and
+chrome://tracing); a frame-time timeline with the budget line; profile.md with the tables; and a sweep
+of tile policies like the thesis's table 6.6.
+
+The frame time is the render thread's: steps 3-7 (steps 1-2 read the tracker's pose). The tracker, as
+Vuforia's in the thesis's app, works on the camera's thread; its time is on a track of its own and out
+of the budget.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from arsim.core.files import atomic_path, write_text_atomic
+from arsim.render.loop import FrameRecord
+
+FRAME_STEPS = ("bake", "background", "objects", "tone_mapping", "overlay")  # the render thread: steps 3-7
+TRACKS = ("frame",) + FRAME_STEPS + ("track",)
+PERCENTILES = (50, 95, 99)
+
+
+def _stats(values) -> dict:
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return {}
+    return {f"p{p}": float(np.percentile(v, p)) for p in PERCENTILES} | {"max": float(v.max()), "frames": int(v.size)}
+
+
+@dataclass
+class ProfileRun:
+    """One run of the loop under one tile policy."""
+
+    label: str  # the tile policy: a side, or auto
+    method: str  # the baked maps' method
+    budget_ms: float
+    records: list[FrameRecord]
+
+    def frame_ms(self) -> np.ndarray:
+        return np.array([sum(r.cpu_ms.get(s, 0.0) for s in FRAME_STEPS) for r in self.records])
+
+    def bake_end(self) -> int | None:
+        """The number of frames until the bake was complete (None: it was not)."""
+        return next((k + 1 for k, r in enumerate(self.records) if r.bake_done), None)
+
+    def summary(self) -> dict:
+        frame = self.frame_ms()
+        misses = int((frame > self.budget_ms).sum())
+        end = self.bake_end()
+        baking = frame[:end] if end else frame
+        seconds = None
+        if end:
+            last = self.records[end - 1]
+            seconds = (last.start_ms + sum(last.cpu_ms.values()) - self.records[0].start_ms) / 1000
+        return {
+            "policy": self.label, "method": self.method, "budget_ms": self.budget_ms, "frames": len(self.records),
+            "misses": misses, "within_budget_pct": 100.0 * (1 - misses / max(len(frame), 1)),
+            "frame_ms": _stats(frame),
+            "bake": {"completed": end is not None, "frames_to_finish": end, "seconds": seconds,
+                     "worst_frame_ms": float(baking.max()) if baking.size else None,
+                     "within_budget_pct_while_baking": 100.0 * float((baking <= self.budget_ms).mean()) if baking.size else None,
+                     "gl_ms_total": float(sum(r.gl_ms.get("bake", 0.0) for r in self.records))},
+            "steps": {s: {"cpu": _stats([r.cpu_ms[s] for r in self.records if s in r.cpu_ms]),
+                          "gl": _stats([r.gl_ms[s] for r in self.records if s in r.gl_ms])}
+                      for s in FRAME_STEPS + ("track",)},
+        }
+
+    def trace(self) -> dict:
+        """Chrome trace-event JSON: complete events ("X", microseconds), a track (tid) per step."""
+        events = [{"name": "process_name", "ph": "M", "pid": 1, "tid": 0, "args": {"name": f"arsim render loop ({self.label})"}}]
+        events += [{"name": "thread_name", "ph": "M", "pid": 1, "tid": t, "args": {"name": name}} for t, name in enumerate(TRACKS)]
+        for r in self.records:
+            frame_steps = [s for s in FRAME_STEPS if s in r.cpu_ms]
+            if frame_steps:
+                start = r.step_start_ms[frame_steps[0]]
+                events.append({"name": f"frame {r.index}", "cat": "frame", "ph": "X", "pid": 1, "tid": 0,
+                               "ts": 1000 * start, "dur": 1000 * sum(r.cpu_ms[s] for s in frame_steps),
+                               "args": {"budget_ms": self.budget_ms, "tag_found": r.found}})
+            for s in FRAME_STEPS + ("track",):
+                if s in r.cpu_ms:
+                    events.append({"name": s, "cat": "step", "ph": "X", "pid": 1, "tid": TRACKS.index(s),
+                                   "ts": 1000 * r.step_start_ms[s], "dur": 1000 * r.cpu_ms[s],
+                                   "args": {"frame": r.index, "gl_ms": r.gl_ms.get(s)} | ({"tiles": r.bake_tiles} if s == "bake" else {})})
+        return {"traceEvents": events, "displayTimeUnit": "ms"}
+
+
+def markdown(runs: list[ProfileRun]) -> str:
+    """profile.md: per run the budget, the misses, the bake, and per step p50/p95/p99/max (CPU and GL)."""
+    lines = ["# Render-loop profile", ""]
+    for run in runs:
+        s = run.summary()
+        b = s["bake"]
+        lines += [f"## Tile policy {run.label} ({run.method} maps)", "",
+                  f"- Frames: {s['frames']}; budget {s['budget_ms']:.1f} ms; over budget: {s['misses']} "
+                  f"({s['within_budget_pct']:.2f} % within)",
+                  "- Bake: " + (f"complete after {b['frames_to_finish']} frames, {b['seconds']:.2f} s; worst frame while "
+                                 f"baking {b['worst_frame_ms']:.3f} ms; {b['within_budget_pct_while_baking']:.2f} % of those "
+                                 f"frames within budget; GL time {b['gl_ms_total']:.1f} ms"
+                                 if b["completed"] else "not complete"), "",
+                  "| step | CPU p50 | CPU p95 | CPU p99 | CPU max | GL p50 | GL p95 | GL p99 | GL max | frames |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        rows = [("frame (steps 3-7)", s["frame_ms"], {})] + [(name, v["cpu"], v["gl"]) for name, v in s["steps"].items()]
+        for name, cpu, gl in rows:
+            if not cpu:
+                continue
+            cells = [f"{cpu[k]:.3f}" for k in ("p50", "p95", "p99", "max")]
+            cells += [f"{gl[k]:.3f}" for k in ("p50", "p95", "p99", "max")] if gl else ["", "", "", ""]
+            lines.append(f"| {name} | " + " | ".join(cells) + f" | {cpu['frames']} |")
+        lines += ["", "Milliseconds. The frame is the render thread's steps 3-7; `track` (the tag tracker) runs on the "
+                  "camera's thread, outside the budget.", ""]
+    if len(runs) > 1:
+        lines += ["## Sweep (as the thesis's table 6.6)", "", sweep_table(runs), ""]
+    return "\n".join(lines)
+
+
+def sweep_table(runs: list[ProfileRun]) -> str:
+    rows = ["| tile policy | frames to finish | total time (s) | worst frame (ms) | within budget while baking |",
+            "|---|---|---|---|---|"]
+    for run in runs:
+        b = run.summary()["bake"]
+        if b["completed"]:
+            rows.append(f"| {run.label} | {b['frames_to_finish']} | {b['seconds']:.2f} | {b['worst_frame_ms']:.2f} | "
+                        f"{b['within_budget_pct_while_baking']:.2f} % |")
+        else:
+            rows.append(f"| {run.label} | not complete | | | |")
+    return "\n".join(rows)
+
+
+def plot_timeline(run: ProfileRun, path: Path) -> None:
+    """Frame time per frame, stacked by step, with the budget line and where the bake completed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    frames = np.arange(len(run.records))
+    fig, ax = plt.subplots(figsize=(10, 4), dpi=110)
+    bottom = np.zeros(len(frames))
+    for step in FRAME_STEPS:
+        ms = np.array([r.cpu_ms.get(step, 0.0) for r in run.records])
+        if ms.any():
+            ax.fill_between(frames, bottom, bottom + ms, step="mid", label=step, linewidth=0)
+            bottom += ms
+    ax.axhline(run.budget_ms, color="k", linestyle="--", linewidth=1, label=f"budget {run.budget_ms:.1f} ms")
+    end = run.bake_end()
+    if end:
+        ax.axvline(end - 1, color="tab:red", linewidth=1, label=f"bake complete (frame {end})")
+    ax.set_xlabel("frame")
+    ax.set_ylabel("render thread, ms")
+    ax.set_title(f"Frame time, tile policy {run.label} ({run.method} maps)")
+    ax.set_ylim(0, max(float(np.percentile(bottom, 99.5)) * 1.2, run.budget_ms * 1.3))
+    ax.legend(loc="upper right", fontsize=8, ncol=2)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+
+
+def write_profile(runs: list[ProfileRun], out_dir: Path) -> list[Path]:
+    """profile.md, profile.json, and per run trace[_POLICY].json and timeline[_POLICY].png."""
+    paths = []
+    for run in runs:
+        suffix = "" if len(runs) == 1 else f"_{run.label}"
+        trace_path, plot_path = out_dir / f"trace{suffix}.json", out_dir / f"timeline{suffix}.png"
+        write_text_atomic(trace_path, json.dumps(run.trace()) + "\n")
+        plot_timeline(run, plot_path)
+        paths += [trace_path, plot_path]
+    write_text_atomic(out_dir / "profile.json", json.dumps({"runs": [r.summary() for r in runs]}, indent=2) + "\n")
+    write_text_atomic(out_dir / "profile.md", markdown(runs))
+    return paths + [out_dir / "profile.json", out_dir / "profile.md"]
