@@ -181,16 +181,33 @@ def cmd_capture(args: argparse.Namespace) -> int:
 # arsim render
 
 
+def _session_inputs(scenario, out: Path, env: Path | None, map_size: int, capture_probe: bool = True):
+    """What an AR session needs: the scenario recorded into out/recording, its AR part, the light probe
+    (the --env file, else captured from the sweep; None when not wanted) as a map_size angle map, and the
+    camera's response (from the capture, or from the sweep's burst)."""
+    from arsim.capture.pipeline import CaptureSettings, burst_response, capture
+    from arsim.evaluate.capture_report import filled
+    from arsim.sensors.camera import SensorSettings
+
+    probe = _probe(env, map_size) if env is not None else None  # read early: a bad file fails first
+    with progress_bar("recording the sweep and the AR path", 1.0) as update:
+        record(scenario, out / "recording", progress=lambda f: update(completed=f))
+    sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
+    if probe is None and capture_probe:
+        with progress_bar("capturing the light probe", 1.0) as update:
+            result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
+        acc = result.accumulator
+        return ar, to_layout(filled(acc.probe(), acc.covered()), "anglemap", map_size), result.response
+    return ar, probe, burst_response(sweep, SensorSettings.of(scenario.device.camera))
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from arsim.capture.pipeline import CaptureSettings, burst_response, capture
-    from arsim.evaluate.capture_report import filled
     from arsim.lighting.bake_output import read_bake
     from arsim.render.content import scene_objects
     from arsim.render.session import SessionSettings, check_maps, maps_needed, run_session, session_maps
     from arsim.scenario.environment import load_environment
-    from arsim.sensors.camera import SensorSettings
 
     scenario = load_scenario(args.scenario)
     if not scenario.ar.enabled:
@@ -216,18 +233,7 @@ def cmd_render(args: argparse.Namespace) -> int:
             raise ArsimError(f"the --maps folders hold maps of sizes {sorted(sizes)}; give maps of one size")
         map_size = sizes.pop()
     out = _output_dir(args.output)
-    probe = _probe(args.env, map_size) if args.env is not None else None  # read early: a bad file fails first
-    with progress_bar("recording the sweep and the AR path", 1.0) as update:
-        record(scenario, out / "recording", progress=lambda f: update(completed=f))
-    sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
-    if probe is None and maps is None:
-        with progress_bar("capturing the light probe", 1.0) as update:
-            result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
-        acc = result.accumulator
-        probe = to_layout(filled(acc.probe(), acc.covered()), "anglemap", map_size)
-        response = result.response
-    else:
-        response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
+    ar, probe, response = _session_inputs(scenario, out, args.env, map_size, capture_probe=maps is None)
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
     with progress_bar(f"computing the maps ({', '.join(needed)})", 1.0) as update:
         maps = maps if maps is not None else session_maps(probe, needed)
@@ -263,8 +269,6 @@ def _tile_policy(text: str) -> int | None:
 
 def cmd_profile(args: argparse.Namespace) -> int:
 
-    from arsim.capture.pipeline import CaptureSettings, burst_response, capture
-    from arsim.evaluate.capture_report import filled
     from arsim.evaluate.profile import sweep_table, write_profile
     from arsim.render.baking import BakeSettings
     from arsim.render.content import scene_objects
@@ -292,19 +296,7 @@ def cmd_profile(args: argparse.Namespace) -> int:
         b.check(map_size)  # a tile that does not divide the maps fails here, before any work
     objects = scene_objects(r)
     out = _output_dir(args.output)
-    probe = _probe(args.env, map_size) if args.env is not None else None
-    with progress_bar("recording the sweep and the AR path", 1.0) as update:
-        record(scenario, out / "recording", progress=lambda f: update(completed=f))
-    sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
-    if probe is None:
-        with progress_bar("capturing the light probe", 1.0) as update:
-            result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
-        probe = to_layout(filled(result.accumulator.probe(), result.accumulator.covered()), "anglemap", map_size)
-        response = result.response
-    else:
-        from arsim.sensors.camera import SensorSettings
-
-        response = burst_response(sweep, SensorSettings.of(scenario.device.camera))
+    ar, probe, response = _session_inputs(scenario, out, args.env, map_size)
     settings = SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True)
     runs = []
     for b in bakes:
