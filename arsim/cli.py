@@ -298,11 +298,11 @@ def cmd_profile(args: argparse.Namespace) -> int:
     out = _output_dir(args.output)
     ar, probe, response = _session_inputs(scenario, out, args.env, map_size)
     settings = SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True)
-    runs = []
+    runs, poses = [], {}
     for b in bakes:
         with progress_bar(f"baking {method} maps in the loop, tile {b.label}", 1.0) as update:
             runs.append(run_profile(ar, response.linear[:, 1], probe, objects, b, budget, args.max_frames or pr.max_frames,
-                                    out / (f"tile_{b.label}" if len(bakes) > 1 else "."), settings,
+                                    out / (f"tile_{b.label}" if len(bakes) > 1 else "."), settings, poses=poses,
                                     progress=lambda f: update(completed=f)))
     write_profile(runs, out)
     for run in runs:

@@ -82,3 +82,24 @@ def test_gl_sh_maps_equal_the_direct_sh_sum_tiled_and_untiled(gl, env, order):
     assert (np.abs(untiled - reference)[large] / np.abs(reference)[large]).max() < 1e-3
     assert (np.abs(untiled - reference) / scale).max() < 1e-4
     assert (untiled[:, ~inside] == 0).all()
+
+
+@pytest.mark.parametrize("threshold", [None, 0.03])
+def test_a_tile_summed_in_ranges_over_several_calls_equals_it_summed_at_once(gl, env, threshold):
+    """What auto does when one tile does not fit a frame: its input texels summed in ranges, the sums
+    added by blending, divided after the last."""
+    whole = GLAccurateBaker(env, EXPONENTS, gl, threshold)
+    parts = GLAccurateBaker(env, EXPONENTS, gl, threshold)
+    tile = Tile(8, 8, 8)
+    whole.bake_tile(tile)
+    total = parts.inputs(tile)
+    bounds = [0, total // 3, total // 2, total]
+    for first, end in zip(bounds, bounds[1:]):
+        parts.bake_range(tile, first, end - first, last=end == total)
+    a, b = whole.read(), parts.read()
+    assert (a[:, 8:16, 8:16] > 0).all()
+    np.testing.assert_allclose(b, a, rtol=1e-5, atol=0)
+    reference = accurate_maps(env, EXPONENTS, tile=tile, bounds_threshold=threshold)
+    assert max_relative(b, reference) < 1e-3
+    whole.release()
+    parts.release()

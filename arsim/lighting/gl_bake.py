@@ -109,7 +109,9 @@ class GLBaker:
 
 class GLAccurateBaker(GLBaker):
     """Alg. 4.1/4.2: the accurate maps, or with bounds_threshold the bounds-optimised ones (lobe values
-    below it dropped, and only the input texels in the widest kept lobe's cone around the tile visited)."""
+    below it dropped, and only the input texels in the widest kept lobe's cone around the tile visited).
+    A tile may be summed in ranges of its input texels over several calls (bake_range), its sums added
+    by blending, and divided when the last range is in."""
 
     shader = "bake_accurate.frag"
 
@@ -125,15 +127,35 @@ class GLAccurateBaker(GLBaker):
         self.probe = self.ctx.buffer(probe.tobytes())
         self.radiance = self.ctx.buffer(radiance.tobytes())
         self.candidates = self.ctx.buffer(reserve=4)
+        self.candidate_lists: dict[Tile, np.ndarray] = {}
+        self.listed: Tile | None = None  # the tile whose list the candidate buffer holds
+        self.sums = [self.ctx.texture((self.n, self.n), 4, dtype="f4") for _ in self.exponents]
+        self.resolvers = []
         for group, program, _, _ in self.passes:
             program["exponents"].value = [self.exponents[k] for k in group]
             if "threshold" in program:
                 program["threshold"].value = bounds_threshold
-        self.resources += [self.probe, self.radiance]
+            sums_fbo = self.ctx.framebuffer([self.sums[k] for k in group])
+            sums_fbo.clear(0.0, 0.0, 0.0, 0.0)
+            header = f"#version 430\n#define MAPS {len(group)}\n"
+            resolver = self.ctx.program(vertex_shader="#version 430\n" + _shader("bake_tile.vert"),
+                                        fragment_shader=header + _shader("bake_resolve.frag"))
+            resolver["sums"].value = list(range(len(group)))
+            self.resolvers.append((resolver, self.ctx.vertex_array(resolver, []), sums_fbo))
+        self.resources += [self.probe, self.radiance, *self.sums]
+
+    def inputs(self, tile: Tile) -> int:
+        """How many input texels a pass over this tile visits: all, or (bounds) the tile's candidates."""
+        return self.count if self.threshold is None else len(self._tile_candidates(tile))
+
+    def _tile_candidates(self, tile: Tile) -> np.ndarray:
+        if tile not in self.candidate_lists:
+            self.candidate_lists[tile] = self._candidates(tile, [min(self.exponents)])
+        return self.candidate_lists[tile]
 
     def _candidates(self, tile: Tile, exponents: Sequence[float]) -> np.ndarray:
         """Input texels within the cone of the widest lobe kept by the threshold around any of the tile's
-        directions (what accurate.py's bounds method visits, for the pass's smallest exponent)."""
+        directions (what accurate.py's bounds method visits, for the smallest exponent)."""
         rr = slice(tile.row0, tile.row0 + tile.size)
         cc = slice(tile.col0, tile.col0 + tile.size)
         block = self.out_dirs[rr, cc][self.inside[rr, cc]]
@@ -145,27 +167,50 @@ class GLAccurateBaker(GLBaker):
         cone = float(np.arccos(self.threshold ** (1.0 / min(exponents))))
         return np.flatnonzero(self.in_dirs @ centre >= np.cos(min(np.pi, cone + spread))).astype(np.int32)
 
-    def _bind(self, group: list[int], program, tile: Tile) -> bool:
+    def _draw(self, tile: Tile, program, vao, fbo) -> None:
+        (s0, t0), scale = tile_offset_scale(tile, self.n)
+        program["tile_offset"].value, program["tile_scale"].value = (s0, t0), scale
+        fbo.use()
+        fbo.viewport = (0, 0, self.n, self.n)
+        vao.render(vertices=6)
+
+    def bake_range(self, tile: Tile, first: int = 0, count: int | None = None, last: bool = True) -> None:
+        """Add the sums over input texels first .. first+count-1 (all: None) to the tile's, and with last,
+        divide them into the maps."""
+        count = self.inputs(tile) - first if count is None else count
         self.probe.bind_to_storage_buffer(0)
         self.radiance.bind_to_storage_buffer(1)
-        count = self.count
-        if tile.size == 0:  # an empty tile (a warm-up draw: the shader compiled, nothing summed)
-            count = 0
-        elif self.threshold is not None:
-            candidates = self._candidates(tile, [self.exponents[k] for k in group])
-            if len(candidates) == 0:
-                return False  # no texel of the tile lies on the disk
+        if self.threshold is not None and self.listed != tile and tile.size > 0:
             # A buffer of its own for each list: llvmpipe lets a write into a buffer that queued draws
             # still read reach them (a tiled bake then mixed the tiles' lists).
             self.candidates.release()
-            self.candidates = self.ctx.buffer(candidates.tobytes())
-            count = len(candidates)
+            self.candidates = self.ctx.buffer(self._tile_candidates(tile).tobytes() or bytes(4))
+            self.listed = tile
         self.candidates.bind_to_storage_buffer(2)
-        program["count"].value = count
-        return True
+        self.directions.use(0)
+        self.ctx.enable(self.ctx.BLEND)
+        self.ctx.blend_func = self.ctx.ONE, self.ctx.ONE
+        for (group, program, vao, _), (_, _, sums_fbo) in zip(self.passes, self.resolvers):
+            program["directions"].value = 0
+            program["first"].value, program["count"].value = first, count if tile.size > 0 else 0
+            self._draw(tile, program, vao, sums_fbo)
+        self.ctx.disable(self.ctx.BLEND)
+        if last:
+            for (group, _, _, maps_fbo), (resolver, vao, _) in zip(self.passes, self.resolvers):
+                for unit, k in enumerate(group):
+                    self.sums[k].use(unit)
+                self._draw(tile, resolver, vao, maps_fbo)
+
+    def bake_tile(self, tile: Tile) -> None:
+        """Compute every map's texels in the tile."""
+        self.bake_range(tile)
 
     def release(self) -> None:
         self.candidates.release()
+        for resolver, vao, fbo in self.resolvers:
+            vao.release()
+            fbo.release()
+            resolver.release()
         super().release()
 
 

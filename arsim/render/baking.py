@@ -19,9 +19,27 @@ from arsim.lighting.gl_bake import GLAccurateBaker, GLShBaker
 BAKE_METHODS = ("accurate", "bounds", "sh")
 AUTO_UNIT = 16  # the tile side `auto` schedules in (or the map's side), split into quadrants where needed
 AUTO_FIRST = 4  # the side of auto's first tile, which measures the GL time per unit of work
+# The smallest tile auto splits down to: llvmpipe runs fragment shaders on 4 x 4 blocks (and GPUs on 2 x 2
+# quads in warps of 32 or 64), so a smaller tile costs as much as a block: 1 x 1 tiles made a 128² bake
+# 16 times slower.
+AUTO_MIN = 4
+BLOCK = 4
+# Below AUTO_MIN, auto sums a tile's input texels in ranges over several frames, halved down to this many.
+MIN_RANGE = 256
 AUTO_SAFETY = 1.25  # predicted cost x this must fit: GL time per unit of work varies from tile to tile
 TILE_OVERHEAD_MS = 0.1  # GL time a tile's passes cost whatever their size (measured on llvmpipe: 0.05-0.1)
 AUTO_STALL_FRAMES = 30  # after this many frames without room for a tile, bake one anyway (the bake must end)
+
+
+@dataclass(frozen=True)
+class Piece:
+    """What one bake call does: a tile, and the range of input terms it sums (all: count None); with
+    last, the tile's sums are then divided into its maps."""
+
+    tile: Tile
+    first: int = 0
+    count: int | None = None
+    last: bool = True
 
 
 @dataclass(frozen=True)
@@ -55,7 +73,7 @@ class LoopBaker:
         else:
             threshold = settings.bounds_threshold if settings.method == "bounds" else None
             self.gl = GLAccurateBaker(probe, self.exponents, ctx, threshold)
-        self.queue = deque(tiles(n, settings.tile or min(AUTO_UNIT, n)))
+        self.queue = deque(Piece(tile) for tile in tiles(n, settings.tile or min(AUTO_UNIT, n)))
         self.texels_total, self.texels_done = int(self.gl.inside.sum()), 0
         self.query = ctx.query(time=True)
         self.cost_per_work: deque[float] = deque(maxlen=8)  # measured GL ms per unit of work, recent tiles
@@ -80,36 +98,55 @@ class LoopBaker:
     def _texels(self, tile) -> int:
         return int(self.gl.inside[tile.row0:tile.row0 + tile.size, tile.col0:tile.col0 + tile.size].sum())
 
-    def _work(self, tile) -> float:
-        """A tile's work in units the GL time is proportional to: its disk texels, times the input texels
-        each visits (accurate), the tile's candidates (bounds), or the SH terms (sh)."""
-        if tile not in self.works:
-            self.works[tile] = self._count_work(tile)
-        return self.works[tile]
+    def _shaded(self, tile) -> int:
+        """The texels the GL shades for a tile: every texel of each 4 x 4 block that holds a disk texel."""
+        inside = self.gl.inside[tile.row0:tile.row0 + tile.size, tile.col0:tile.col0 + tile.size]
+        b = max(min(BLOCK, tile.size), 1)
+        blocks = inside.reshape(inside.shape[0] // b, b, inside.shape[1] // b, b).any(axis=(1, 3))
+        return int(blocks.sum()) * b * b
 
-    def _count_work(self, tile) -> float:
-        texels = float(self._texels(tile))
+    def _inputs(self, tile) -> int:
+        """The input terms a texel of the tile sums: input texels (accurate), candidates (bounds), SH terms."""
+        return self.gl.order ** 2 if isinstance(self.gl, GLShBaker) else self.gl.inputs(tile)
+
+    def _work(self, piece: Piece) -> float:
+        """A piece's work in units the GL time is proportional to: the texels shaded times the input terms
+        each sums."""
+        if piece not in self.works:
+            count = self._inputs(piece.tile) if piece.count is None else piece.count
+            self.works[piece] = float(self._shaded(piece.tile)) * count
+        return self.works[piece]
+
+    def _split(self) -> bool:
+        """Split the head of the queue: a whole tile into its four quadrants (row by row, the thesis's
+        order) down to AUTO_MIN, then (accurate and bounds) its input texels into halves down to
+        MIN_RANGE, summed over several frames; False when it cannot be split."""
+        piece = self.queue[0]
+        tile = piece.tile
+        if piece.count is None and tile.size > AUTO_MIN:
+            self.queue.popleft()
+            half = tile.size // 2
+            for dr, dc in reversed([(0, 0), (0, half), (half, 0), (half, half)]):
+                self.queue.appendleft(Piece(Tile(tile.row0 + dr, tile.col0 + dc, half)))
+            return True
         if isinstance(self.gl, GLShBaker):
-            return texels * self.gl.order ** 2
-        if self.gl.threshold is not None:
-            return texels * len(self.gl._candidates(tile, [min(self.exponents)]))
-        return texels * self.gl.count
-
-    def _split(self) -> None:
-        """Replace the head of the queue by its four quadrants (row by row, as the thesis's order)."""
-        tile = self.queue.popleft()
-        half = tile.size // 2
-        for quadrant in reversed([Tile(tile.row0 + dr, tile.col0 + dc, half) for dr in (0, half) for dc in (0, half)]):
-            self.queue.appendleft(quadrant)
+            return False
+        count = self._inputs(tile) if piece.count is None else piece.count
+        if count <= MIN_RANGE:
+            return False
+        self.queue.popleft()
+        half = count // 2
+        self.queue.appendleft(Piece(tile, piece.first + half, count - half, piece.last))
+        self.queue.appendleft(Piece(tile, piece.first, half, False))
+        return True
 
     def _auto_batch(self, available_ms: float) -> list:
-        """The tiles predicted to fit: from the head of the queue, splitting the head into quadrants
-        while even it alone would not fit (down to single texels), so that the work per frame follows
-        the time left however costly a texel is."""
+        """The pieces predicted to fit: from the head of the queue, splitting the head while even it
+        alone would not fit, so that the work per frame follows the time left however costly a texel is."""
         batch, spent = [], 0.0
-        if not self.cost_per_work:  # nothing measured yet: a small tile, to measure
-            while self.queue[0].size > AUTO_FIRST:
-                self._split()
+        if not self.cost_per_work:  # nothing measured yet: a small piece, to measure
+            while self.queue[0].tile.size > AUTO_FIRST and self._split():
+                pass
             return [self.queue.popleft()]
         cost = max(self.cost_per_work) * AUTO_SAFETY
         while self.queue:
@@ -117,14 +154,12 @@ class LoopBaker:
             if spent + predicted <= available_ms:
                 batch.append(self.queue.popleft())
                 spent += predicted
-            elif not batch and self.queue[0].size > 1:
-                self._split()
-            else:
+            elif batch or not self._split():
                 break
         return batch
 
     def step(self, available_ms: float) -> int:
-        """Bake the next tile (fixed size), or the tiles predicted to fit in available_ms (auto); returns
+        """Bake the next tile (fixed size), or the pieces predicted to fit in available_ms (auto); returns
         how many."""
         self.last_gl_ms = 0.0
         if self.done:
@@ -135,21 +170,24 @@ class LoopBaker:
                 self.idle_frames += 1
                 if self.idle_frames < AUTO_STALL_FRAMES:
                     return 0
-                batch = [self.queue.popleft()]  # (a single texel by now: the bake must end)
+                batch = [self.queue.popleft()]  # (the smallest piece by now: the bake must end)
             self.idle_frames = 0
         else:
             batch = [self.queue.popleft()]
         with self.query:
-            for tile in batch:
-                self.gl.bake_tile(tile)
+            for piece in batch:
+                if isinstance(self.gl, GLShBaker):
+                    self.gl.bake_tile(piece.tile)
+                else:
+                    self.gl.bake_range(piece.tile, piece.first, piece.count, piece.last)
         self.ctx.finish()
         elapsed = self.query.elapsed / 1e6
         self.last_gl_ms = elapsed
         self.gl_ms_total += elapsed
-        work = sum(self._work(tile) for tile in batch)
+        work = sum(self._work(piece) for piece in batch)
         if work > 0:
             self.cost_per_work.append(max(elapsed - TILE_OVERHEAD_MS * len(batch), 0.0) / work)
-        self.texels_done += sum(self._texels(tile) for tile in batch)
+        self.texels_done += sum(self._texels(piece.tile) for piece in batch if piece.last)
         return len(batch)
 
     def maps(self) -> np.ndarray:

@@ -174,11 +174,11 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
 def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, objects: list[SceneObject],
                 bake: BakeSettings, budget_ms: float, max_frames: int, out_dir: Path | None = None,
                 settings: SessionSettings = SessionSettings(method="mipmap", overlay=True), tail_frames: int = 30,
-                progress: Callable[[float], None] = lambda fraction: None) -> ProfileRun:
+                poses: dict | None = None, progress: Callable[[float], None] = lambda fraction: None) -> ProfileRun:
     """The render loop over the AR path's frames, again and again, while step 3 bakes the objects' maps
     from `probe` with `bake` (the objects lit by `settings.method` maps meanwhile), until the bake is
     complete and tail_frames more, or max_frames. The tracker runs once per recorded frame (its pose is
-    kept for the next lap). With out_dir, frames at a quarter and half of the bake and after it go to
+    kept in `poses` for the next lap, and the next run). With out_dir, frames at a quarter and half of the bake and after it go to
     out_dir/frames (the progress display)."""
     ctx = create_gl_context()
     camera = recording_camera(rec)
@@ -190,7 +190,7 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
         renderer.add(obj)
     baker = LoopBaker(probe, needed[settings.method], bake, ctx)
     loop = FrameLoop(ctx, tracker, renderer, Shading(settings.key, settings.white, settings.log_average), settings.overlay,
-                     settings.method, baker, budget_ms, pose_cache={})
+                     settings.method, baker, budget_ms, pose_cache={} if poses is None else poses)
     marks = [0.25, 0.5, 1.0]
     if out_dir is not None:
         (out_dir / "frames").mkdir(parents=True, exist_ok=True)
