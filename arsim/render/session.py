@@ -1,10 +1,7 @@
-"""The AR session (thesis 5.1): per frame, the tag's pose from the tracker (steps 1-2), the camera
-frame as the background (4), the virtual objects drawn into the HDR colour and the mask with the maps
-from the captured probe (5), the masked tone mapping (6) and the overlay (7); beside it the truth
-frame, the same objects lit by maps from the true environment, and the FLIP difference between the two
-inside the mask. Each step is timed on the CPU and, for the GL passes, with timer queries.
-
-Map baking inside the frame loop (step 3) is not part of this loop yet.
+"""The AR session (thesis 5.1) over an AR recording, on the render loop (loop.py): `run_session` lights
+the objects with maps from the captured probe and renders beside each frame the truth frame, the same
+objects lit by maps from the true environment, with the FLIP difference between the two inside the mask;
+`run_profile` runs the loop lap after lap while step 3 bakes maps tile by tile, for the profiler.
 """
 
 from __future__ import annotations
