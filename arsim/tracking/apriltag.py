@@ -63,27 +63,52 @@ class TagTracker:
         used to linearise frames before detection; None: detect on the codes."""
         if family not in TAG_DICTIONARIES:
             raise ValueError(f"unknown tag family {family!r}; known: {', '.join(TAG_DICTIONARIES)}")
+        dictionary = cv2.aruco.getPredefinedDictionary(TAG_DICTIONARIES[family])
         parameters = cv2.aruco.DetectorParameters()
         parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_APRILTAG
+        # The AprilTag corner refinement runs AprilTag's own quad search over the image it is given:
+        # 130 ms on a 640 x 480 frame. The tag is found first without it (4 ms), then again with it on
+        # the tag's surroundings only, which gives the corners the whole frame would.
+        self.finder = cv2.aruco.ArucoDetector(dictionary, cv2.aruco.DetectorParameters())
         self.linearise = None
         if linear_of_code is not None:
             linear = np.asarray(linear_of_code, dtype=np.float64)
             self.linearise = np.clip(np.round(255 * linear / linear[-1]), 0, 255).astype(np.uint8)
-        self.detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(TAG_DICTIONARIES[family]), parameters)
+        self.detector = cv2.aruco.ArucoDetector(dictionary, parameters)
         self.camera, self.tag_id = camera, tag_id
         h = tag_size_m / 2
         # IPPE_SQUARE's order: top-left, top-right, bottom-right, bottom-left, in the marker frame.
         self.marker_corners = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+    def _find(self, detector, grey: np.ndarray) -> np.ndarray | None:
+        corners, ids, _ = detector.detectMarkers(grey)
+        if ids is None or self.tag_id not in ids.ravel():
+            return None
+        return corners[list(ids.ravel()).index(self.tag_id)].reshape(4, 2).astype(np.float64)
+
+    def _corners(self, grey: np.ndarray) -> np.ndarray | None:
+        """The tag's four corners, refined (AprilTag's method) on a window around where it was found: the
+        tag's bounding box widened by half its size on each side (the white margin and beyond)."""
+        rough = self._find(self.finder, grey)
+        if rough is None:  # (AprilTag's own search finds some tags the quick one misses)
+            return self._find(self.detector, grey)
+        low, high = rough.min(axis=0), rough.max(axis=0)
+        pad = 0.5 * (high - low).max() + 8
+        x0, y0 = np.maximum(np.floor(low - pad).astype(int), 0)
+        x1, y1 = np.minimum(np.ceil(high + pad).astype(int) + 1, grey.shape[::-1])
+        refined = self._find(self.detector, np.ascontiguousarray(grey[y0:y1, x0:x1]))
+        if refined is None:  # (not seen in the window: the whole frame, as before)
+            return self._find(self.detector, grey)
+        return refined + [x0, y0]
 
     def track(self, frame: np.ndarray) -> TagPose:
         """The tag's pose in an 8-bit RGB or grey frame, or LOST."""
         grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
         if self.linearise is not None:
             grey = cv2.LUT(grey, self.linearise)
-        corners, ids, _ = self.detector.detectMarkers(grey)
-        if ids is None or self.tag_id not in ids.ravel():
+        image_corners = self._corners(grey)
+        if image_corners is None:
             return LOST
-        image_corners = corners[list(ids.ravel()).index(self.tag_id)].reshape(4, 2).astype(np.float64)
         ok, rvec, tvec = cv2.solvePnP(self.marker_corners, image_corners, self.camera.matrix, self.camera.distortion,
                                       flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
