@@ -532,19 +532,23 @@ def build_parser() -> argparse.ArgumentParser:
                    help="align every K-th metered frame against the probe (default: [capture] align_every, 1)")
     p.set_defaults(run=cmd_capture)
 
+    def session_options(p: argparse.ArgumentParser, env_help: str) -> None:
+        """What render and profile share: the scenario, the output folder, the light's file, the maps' size."""
+        p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
+                       help="scenario .toml (default: the embedded default scenario)")
+        p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+        p.add_argument("--env", type=Path, metavar="PROBE.exr", help=env_help)
+        p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
+
     p = _command(sub, "render", "run the AR session: record the scenario, capture the probe (or take --env), track the tag, "
                  "render the virtual objects lit by the maps, tone-map them over the camera frames, and compare each "
                  "frame with the truth frame (the objects lit by the true environment's maps) by FLIP",
                  "arsim render -o session   (or: arsim render scenarios/indoor.toml -o session --env probe.exr --method sh)")
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
-                   help="scenario .toml (default: the embedded default scenario)")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
-    p.add_argument("--env", type=Path, metavar="PROBE.exr", help="light the objects with this environment instead of the captured probe")
+    session_options(p, "light the objects with this environment instead of the captured probe")
     p.add_argument("--maps", type=Path, nargs="+", metavar="DIR",
                    help="light the objects with maps baked before (`arsim bake` folders, one per method) instead of the captured probe")
     p.add_argument("--method", choices=sorted(METHODS),
                    help="map method of the objects that name none (default: [render] method, fast)")
-    p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
     p.add_argument("--key", type=_positive("--key", float), help="Reinhard's key a (default: [render] key, 0.18)")
     p.add_argument("--white", type=_positive("--white", float), help="Reinhard's L_white (default: [render] white, 2.0)")
     p.add_argument("--log-average", action=argparse.BooleanOptionalAction,
@@ -559,16 +563,12 @@ def build_parser() -> argparse.ArgumentParser:
                  "CPU and GL time against a frame budget, a Chrome trace (Perfetto), a timeline plot and profile.md; "
                  "--sweep compares tile policies (the thesis's table 6.6)",
                  "arsim profile -o prof --tile auto   (or: arsim profile scenarios/indoor.toml -o prof --sweep 32,64,128,auto)")
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
-                   help="scenario .toml (default: the embedded default scenario)")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
-    p.add_argument("--env", type=Path, metavar="PROBE.exr", help="bake from this environment instead of the captured probe")
+    session_options(p, "bake from this environment instead of the captured probe")
     p.add_argument("--budget-ms", type=_positive("--budget-ms", float), metavar="X",
                    help="frame budget in ms (default: [profile] budget_ms, 33.3)")
     p.add_argument("--tile", metavar="N|auto", help="tile side baked per frame, or auto (default: [profile] tile, auto)")
     p.add_argument("--sweep", metavar="LIST", help="run each tile policy, e.g. 32,64,128,auto, and tabulate them")
     p.add_argument("--bake", choices=("accurate", "bounds", "sh"), help="method of the maps baked (default: [profile] bake, accurate)")
-    p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
     p.add_argument("--max-frames", type=_positive("--max-frames"), metavar="K",
                    help="stop after K frames even if the bake is not complete (default: [profile] max_frames)")
     p.set_defaults(run=cmd_profile)

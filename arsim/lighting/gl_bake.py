@@ -69,22 +69,29 @@ class GLBaker:
             self.passes.append((group, program, self.ctx.vertex_array(program, []), fbo))
         self.resources = [self.directions, *self.maps]
 
-    def _bind(self, group: list[int], program, tile: Tile) -> bool:
-        """Set what this pass over this tile needs; False to skip it."""
-        return True
+    # Whether a tile's input terms can be summed in ranges over several calls (bake_range's first, count).
+    splits_inputs = False
+
+    def inputs(self, tile: Tile) -> int:
+        """How many input terms each texel of the tile sums: what the time of a pass is proportional to."""
+        raise NotImplementedError
+
+    def bake_range(self, tile: Tile, first: int = 0, count: int | None = None, last: bool = True) -> None:
+        """Add the tile's sums over input terms first .. first+count-1 (all: None) and, with last, make
+        its maps' texels from them."""
+        raise NotImplementedError
 
     def bake_tile(self, tile: Tile) -> None:
         """Compute every map's texels in the tile."""
+        self.bake_range(tile)
+
+    def _draw(self, tile: Tile, program, vao, fbo) -> None:
+        """One pass's quad over the tile, placed by the thesis's tileOffset and tileScale."""
         (s0, t0), scale = tile_offset_scale(tile, self.n)
-        self.directions.use(0)
-        for group, program, vao, fbo in self.passes:
-            if not self._bind(group, program, tile):
-                continue
-            program["directions"].value = 0
-            program["tile_offset"].value, program["tile_scale"].value = (s0, t0), scale
-            fbo.use()
-            fbo.viewport = (0, 0, self.n, self.n)
-            vao.render(vertices=6)
+        program["tile_offset"].value, program["tile_scale"].value = (s0, t0), scale
+        fbo.use()
+        fbo.viewport = (0, 0, self.n, self.n)
+        vao.render(vertices=6)
 
     def bake_all(self, tile_size: int | None = None) -> np.ndarray:
         for tile in tiles(self.n, tile_size or self.n):
@@ -114,6 +121,7 @@ class GLAccurateBaker(GLBaker):
     by blending, and divided when the last range is in."""
 
     shader = "bake_accurate.frag"
+    splits_inputs = True
 
     def __init__(self, env: np.ndarray, exponents: Sequence[float], ctx=None, bounds_threshold: float | None = None):
         super().__init__(env, exponents, ctx, ["BOUNDS"] if bounds_threshold is not None else [])
@@ -149,30 +157,21 @@ class GLAccurateBaker(GLBaker):
         return self.count if self.threshold is None else len(self._tile_candidates(tile))
 
     def _tile_candidates(self, tile: Tile) -> np.ndarray:
+        """Input texels within the cone of the widest lobe kept by the threshold (the smallest exponent's)
+        around any of the tile's directions: what accurate.py's bounds method visits."""
         if tile not in self.candidate_lists:
-            self.candidate_lists[tile] = self._candidates(tile, [min(self.exponents)])
+            rr = slice(tile.row0, tile.row0 + tile.size)
+            cc = slice(tile.col0, tile.col0 + tile.size)
+            block = self.out_dirs[rr, cc][self.inside[rr, cc]]
+            found = np.zeros(0, dtype=np.int32)
+            if len(block):
+                centre = block.mean(axis=0)
+                centre /= np.linalg.norm(centre)
+                spread = float(np.arccos(np.clip(block @ centre, -1.0, 1.0)).max())
+                cone = float(np.arccos(self.threshold ** (1.0 / min(self.exponents))))
+                found = np.flatnonzero(self.in_dirs @ centre >= np.cos(min(np.pi, cone + spread))).astype(np.int32)
+            self.candidate_lists[tile] = found
         return self.candidate_lists[tile]
-
-    def _candidates(self, tile: Tile, exponents: Sequence[float]) -> np.ndarray:
-        """Input texels within the cone of the widest lobe kept by the threshold around any of the tile's
-        directions (what accurate.py's bounds method visits, for the smallest exponent)."""
-        rr = slice(tile.row0, tile.row0 + tile.size)
-        cc = slice(tile.col0, tile.col0 + tile.size)
-        block = self.out_dirs[rr, cc][self.inside[rr, cc]]
-        if len(block) == 0:
-            return np.zeros(0, dtype=np.int32)
-        centre = block.mean(axis=0)
-        centre /= np.linalg.norm(centre)
-        spread = float(np.arccos(np.clip(block @ centre, -1.0, 1.0)).max())
-        cone = float(np.arccos(self.threshold ** (1.0 / min(exponents))))
-        return np.flatnonzero(self.in_dirs @ centre >= np.cos(min(np.pi, cone + spread))).astype(np.int32)
-
-    def _draw(self, tile: Tile, program, vao, fbo) -> None:
-        (s0, t0), scale = tile_offset_scale(tile, self.n)
-        program["tile_offset"].value, program["tile_scale"].value = (s0, t0), scale
-        fbo.use()
-        fbo.viewport = (0, 0, self.n, self.n)
-        vao.render(vertices=6)
 
     def bake_range(self, tile: Tile, first: int = 0, count: int | None = None, last: bool = True) -> None:
         """Add the sums over input texels first .. first+count-1 (all: None) to the tile's, and with last,
@@ -200,10 +199,6 @@ class GLAccurateBaker(GLBaker):
                 for unit, k in enumerate(group):
                     self.sums[k].use(unit)
                 self._draw(tile, resolver, vao, maps_fbo)
-
-    def bake_tile(self, tile: Tile) -> None:
-        """Compute every map's texels in the tile."""
-        self.bake_range(tile)
 
     def release(self) -> None:
         self.candidates.release()
@@ -237,11 +232,19 @@ class GLShBaker(GLBaker):
             program["order"].value = order
         self.resources += [self.coefficients, *self.kappas]
 
-    def _bind(self, group: list[int], program, tile: Tile) -> bool:
+    def inputs(self, tile: Tile) -> int:
+        return self.order * self.order
+
+    def bake_range(self, tile: Tile, first: int = 0, count: int | None = None, last: bool = True) -> None:
+        """The tile's maps in one call: every SH term of a texel is summed in one pass (no ranges)."""
+        if first != 0 or count not in (None, self.inputs(tile)) or not last:
+            raise ValueError("SH maps are baked a whole tile at a time")
+        self.directions.use(0)
         self.coefficients.use(1)
-        self.kappas[group[0] // MAX_MAPS_PER_PASS].use(2)
-        program["coefficients"].value, program["kappas"].value = 1, 2
-        return True
+        for kappas, (group, program, vao, fbo) in zip(self.kappas, self.passes):
+            kappas.use(2)
+            program["directions"].value, program["coefficients"].value, program["kappas"].value = 0, 1, 2
+            self._draw(tile, program, vao, fbo)
 
 
 def gl_accurate_maps(env: np.ndarray, exponents: Sequence[float], tile_size: int | None = None, ctx=None,

@@ -22,8 +22,8 @@ AUTO_FIRST = 4  # the side of auto's first tile, which measures the GL time per 
 # The smallest tile auto splits down to: llvmpipe runs fragment shaders on 4 x 4 blocks (and GPUs on 2 x 2
 # quads in warps of 32 or 64), so a smaller tile costs as much as a block: 1 x 1 tiles made a 128² bake
 # 16 times slower.
-AUTO_MIN = 4
 BLOCK = 4
+AUTO_MIN = BLOCK
 # Below AUTO_MIN, auto sums a tile's input texels in ranges over several frames, halved down to this many.
 MIN_RANGE = 256
 AUTO_SAFETY = 1.25  # predicted cost x this must fit: GL time per unit of work varies from tile to tile
@@ -105,15 +105,11 @@ class LoopBaker:
         blocks = inside.reshape(inside.shape[0] // b, b, inside.shape[1] // b, b).any(axis=(1, 3))
         return int(blocks.sum()) * b * b
 
-    def _inputs(self, tile) -> int:
-        """The input terms a texel of the tile sums: input texels (accurate), candidates (bounds), SH terms."""
-        return self.gl.order ** 2 if isinstance(self.gl, GLShBaker) else self.gl.inputs(tile)
-
     def _work(self, piece: Piece) -> float:
         """A piece's work in units the GL time is proportional to: the texels shaded times the input terms
         each sums."""
         if piece not in self.works:
-            count = self._inputs(piece.tile) if piece.count is None else piece.count
+            count = self.gl.inputs(piece.tile) if piece.count is None else piece.count
             self.works[piece] = float(self._shaded(piece.tile)) * count
         return self.works[piece]
 
@@ -129,9 +125,9 @@ class LoopBaker:
             for dr, dc in reversed([(0, 0), (0, half), (half, 0), (half, half)]):
                 self.queue.appendleft(Piece(Tile(tile.row0 + dr, tile.col0 + dc, half)))
             return True
-        if isinstance(self.gl, GLShBaker):
+        if not self.gl.splits_inputs:
             return False
-        count = self._inputs(tile) if piece.count is None else piece.count
+        count = self.gl.inputs(tile) if piece.count is None else piece.count
         if count <= MIN_RANGE:
             return False
         self.queue.popleft()
@@ -176,10 +172,7 @@ class LoopBaker:
             batch = [self.queue.popleft()]
         with self.query:
             for piece in batch:
-                if isinstance(self.gl, GLShBaker):
-                    self.gl.bake_tile(piece.tile)
-                else:
-                    self.gl.bake_range(piece.tile, piece.first, piece.count, piece.last)
+                self.gl.bake_range(piece.tile, piece.first, piece.count, piece.last)
         self.ctx.finish()
         elapsed = self.query.elapsed / 1e6
         self.last_gl_ms = elapsed

@@ -95,13 +95,6 @@ def _chord_gap(radius: float, steps_per_turn: int) -> float:
     return radius * (1.0 - np.cos(np.pi / steps_per_turn))
 
 
-def sphere_lods(radius: float, rings: int) -> tuple[tuple[Mesh, float], ...]:
-    """Coarser latitude-longitude spheres than rings x 2 rings, down to 6 x 12, with their departures
-    from the sphere (a cell's centre lies inside by about the sum of its two chords' gaps)."""
-    steps = [r for r in (36, 24, 16, 12, 8, 6) if r < rings]
-    return tuple((uv_sphere(radius, r, 2 * r), _chord_gap(radius, 2 * r) * 2) for r in steps)
-
-
 def torus_lods(major: float, minor: float, rings: int) -> tuple[tuple[Mesh, float], ...]:
     """Coarser tori than rings x rings / 2, down to 16 x 8, with their departures from the torus (the ring's
     and the tube's chord gaps added)."""
@@ -126,10 +119,10 @@ def scene_objects(section) -> list[SceneObject]:
             for k, exponent in enumerate(SPHERE_EXPONENTS):
                 dx = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
                 objects.append(SceneObject(uv_sphere(o.size_m, 32, 64), Material(o.kd, o.ks, exponent, method=o.method),
-                                           translation(x + dx, o.size_m, z), sphere_lods(o.size_m, 32), sphere=o.size_m))
+                                           translation(x + dx, o.size_m, z), sphere=o.size_m))
         elif o.kind == "sphere":
             objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent, method=o.method),
-                                       translation(x, o.size_m, z), sphere_lods(o.size_m, 48), sphere=o.size_m))
+                                       translation(x, o.size_m, z), sphere=o.size_m))
         elif o.kind == "mesh":
             objects.append(mesh_object(o))
         else:

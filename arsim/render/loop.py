@@ -18,7 +18,6 @@ from arsim.render.baking import LoopBaker
 from arsim.render.renderer import Renderer
 from arsim.tracking.apriltag import TagPose, TagTracker
 
-LOOP_STEPS = ("track", "bake", "background", "objects", "tone_mapping", "overlay")  # steps 1-2, 3, 4, 5, 6, 7
 GL_STEPS = ("bake", "background", "objects", "tone_mapping", "overlay")
 BUDGET_MARGIN = 0.05  # the share of the budget the bake leaves free: the other steps vary
 
@@ -88,14 +87,23 @@ class FrameLoop:
                 self.renderer.update_map("", exponent, anglemap)
             self.baked_in_use = True
 
+    def _pose(self, frame: np.ndarray, index: int, record: FrameRecord | None = None) -> TagPose:
+        """The tracker's pose for a frame (timed as step "track" into record), or the one kept for it."""
+        if self.pose_cache is not None and index in self.pose_cache:
+            return self.pose_cache[index]
+        poses = []
+        if record is None:
+            poses.append(self.tracker.track(frame))
+        else:
+            self._timed(record, "track", lambda: poses.append(self.tracker.track(frame)), gl=False)
+        if self.pose_cache is not None:
+            self.pose_cache[index] = poses[0]
+        return poses[0]
+
     def warm_up(self, frame: np.ndarray, index: int) -> None:
         """Run every pass once, unrecorded, as an app does while it loads: llvmpipe compiles a shader's
         machine code at its first draw (up to 100 ms), which would otherwise land in the first frames."""
-        pose = self.pose_cache.get(index) if self.pose_cache is not None else None
-        if pose is None:
-            pose = self.tracker.track(frame)
-            if self.pose_cache is not None:
-                self.pose_cache[index] = pose
+        pose = self._pose(frame, index)
         if self.baker is not None:
             self.baker.warm_up()
         self.renderer.background_pass(frame)
@@ -111,18 +119,7 @@ class FrameLoop:
         if self.origin is None:
             self.origin = now
         record = FrameRecord(index, 1000 * (now - self.origin))
-        pose = None
-
-        def track():
-            nonlocal pose
-            pose = self.tracker.track(frame)
-
-        if self.pose_cache is not None and index in self.pose_cache:
-            pose = self.pose_cache[index]
-        else:
-            self._timed(record, "track", track, gl=False)
-            if self.pose_cache is not None:
-                self.pose_cache[index] = pose
+        pose = self._pose(frame, index, record)
         record.found = pose.found
         if self.baker is not None and not self.baked_in_use:
             # (timed on the CPU here; the baker times its own GL work: timer queries cannot nest)

@@ -75,7 +75,6 @@ LOD_ERROR_PX = 0.5
 
 @dataclass
 class _Drawable:
-    obj: SceneObject
     program: object
     vaos: list  # per mesh: the object's mesh, then its lods
     errors: np.ndarray  # per mesh: its largest departure from the surface, world units
@@ -155,6 +154,7 @@ class Renderer:
         self.maps = {(name, float(s)): self._map_texture(m) for name, ms in by_method.items() for s, m in ms.items()}
         self.default_method = next(iter(by_method)) if method is None else method
         self.objects: list[_Drawable] = []
+        self.corners = np.zeros((0, 8, 4))  # per object, its world bounding box's corners
         self.tiles: dict[tuple[int, int], _Tile] = {}
         self.tile: _Tile | None = None  # the last render_objects' tile; None when nothing was in view
         self.rect: tuple[int, int, int, int] | None = None  # its rectangle in the frame: x, y (GL, from the bottom), w, h
@@ -227,8 +227,8 @@ class Renderer:
                                                   max(tex.size)) for name, tex in textures.items() if tex is not None}
         low, high = obj.mesh.positions.min(axis=0), obj.mesh.positions.max(axis=0)
         corners = np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
-        self.objects.append(_Drawable(obj, program, vaos, errors, units, corners @ obj.model.T, texel_world, sphere))
-        self.corners = np.stack([d.corners for d in self.objects])  # (objects, 8, 4)
+        self.objects.append(_Drawable(program, vaos, errors, units, corners @ obj.model.T, texel_world, sphere))
+        self.corners = np.stack([d.corners for d in self.objects])
 
     def screen_rects(self, view_projection: np.ndarray) -> list[tuple[int, int, int, int]]:
         """Per object that can be in view, the frame's rectangle (x, y from the bottom, w, h) that holds

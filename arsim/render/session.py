@@ -21,9 +21,9 @@ from arsim.core.files import atomic_path, write_bytes_atomic
 from arsim.core.gl import create_gl_context
 from arsim.core.png import png_bytes
 from arsim.evaluate.recording_plots import recording_camera
+from arsim.evaluate.profile import ProfileRun
 from arsim.evaluate.tracking import TrackingRun, measure_poses
 from arsim.lighting.methods import bake
-from arsim.evaluate.profile import ProfileRun
 from arsim.render.baking import BakeSettings, LoopBaker
 from arsim.render.loop import GL_STEPS, FrameLoop, Shading
 from arsim.render.renderer import Renderer, SceneObject
@@ -105,6 +105,20 @@ def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> fl
     return float((error[..., 0] if error.ndim == 3 else error)[mask[box]].mean())
 
 
+def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray) -> tuple:
+    """The recording's camera, and a tracker for its table's tag that linearises frames with linear_of_code."""
+    camera = recording_camera(rec)
+    table = rec.meta["table"]
+    return camera, TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+
+
+def _renderer(camera, maps: dict, ctx, method: str, objects: list[SceneObject]) -> Renderer:
+    renderer = Renderer(camera, maps, ctx, method=method)
+    for obj in objects:
+        renderer.add(obj)
+    return renderer
+
+
 def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_maps: dict, out_dir: Path,
                 objects: list[SceneObject], settings: SessionSettings = SessionSettings(),
                 progress: Callable[[float], None] = lambda fraction: None) -> SessionResult:
@@ -112,16 +126,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
     (per method, per exponent: from the captured probe, or baked before) and truth frames lit by
     `truth_maps` (the same from the true environment); writes frames/*.png and session.mp4 into out_dir."""
     ctx = create_gl_context()
-    camera = recording_camera(rec)
-    table = rec.meta["table"]
-    tracker = TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
-    renderers = []
-    for light in (maps, truth_maps):
-        renderer = Renderer(camera, light, ctx, method=settings.method)
-        for obj in objects:
-            renderer.add(obj)
-        renderers.append(renderer)
-    captured, true_light = renderers
+    camera, tracker = _camera_and_tracker(rec, linear_of_code)
+    captured, true_light = (_renderer(camera, light, ctx, settings.method, objects) for light in (maps, truth_maps))
     indices = np.arange(0, len(rec.frames), settings.every)
     count = len(indices)
     saved = set(settings.saved_frames or indices[np.linspace(0, count - 1, 4).round().astype(int)].tolist())
@@ -169,23 +175,19 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
 
 
 def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, objects: list[SceneObject],
-                bake: BakeSettings, budget_ms: float, max_frames: int, out_dir: Path | None = None,
+                bake_settings: BakeSettings, budget_ms: float, max_frames: int, out_dir: Path | None = None,
                 settings: SessionSettings = SessionSettings(method="mipmap", overlay=True), tail_frames: int = 30,
                 poses: dict | None = None, progress: Callable[[float], None] = lambda fraction: None) -> ProfileRun:
     """The render loop over the AR path's frames, again and again, while step 3 bakes the objects' maps
-    from `probe` with `bake` (the objects lit by `settings.method` maps meanwhile), until the bake is
-    complete and tail_frames more, or max_frames. The tracker runs once per recorded frame (its pose is
-    kept in `poses` for the next lap, and the next run). With out_dir, frames at a quarter and half of the bake and after it go to
-    out_dir/frames (the progress display)."""
+    from `probe` with `bake_settings` (the objects lit by `settings.method` maps meanwhile), until the
+    bake is complete and tail_frames more, or max_frames. The tracker runs once per recorded frame (its
+    pose is kept in `poses` for the next lap, and the next run). With out_dir, frames at a quarter and a
+    half of the bake and after it go to out_dir/frames (the progress display)."""
     ctx = create_gl_context()
-    camera = recording_camera(rec)
-    table = rec.meta["table"]
-    tracker = TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+    camera, tracker = _camera_and_tracker(rec, linear_of_code)
     needed = maps_needed(objects, settings.method)
-    renderer = Renderer(camera, session_maps(probe, needed), ctx, method=settings.method)
-    for obj in objects:
-        renderer.add(obj)
-    baker = LoopBaker(probe, needed[settings.method], bake, ctx)
+    renderer = _renderer(camera, session_maps(probe, needed), ctx, settings.method, objects)
+    baker = LoopBaker(probe, needed[settings.method], bake_settings, ctx)
     loop = FrameLoop(ctx, tracker, renderer, Shading(settings.key, settings.white, settings.log_average), settings.overlay,
                      settings.method, baker, budget_ms, pose_cache={} if poses is None else poses)
     marks = [0.25, 0.5, 1.0]
@@ -208,4 +210,4 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
             progress(baker.progress)
     progress(1.0)
     baker.release()
-    return ProfileRun(bake.label, bake.method, budget_ms, records)
+    return ProfileRun(bake_settings.label, bake_settings.method, budget_ms, records)
