@@ -1,8 +1,9 @@
 """GL bake speed (prints figures; not a test): the accurate, bounds and SH maps baked on the GL path
 (arsim/lighting/gl_bake.py), one tile in the middle of the disk after a warm-up, timed with a GL timer
-query; per method the time of the tile and the cost per unit of work (accurate: per output texel, input
-texel and map; bounds: per output texel, candidate and map; SH: per output texel, SH term and map), and
-from it the GL time a whole bake would take.
+query and by the time the CPU waits for it (on llvmpipe, the query can miss part of a draw spread over
+its threads); per method the time of the tile and the cost per unit of work (accurate: per output
+texel, input texel visited and map; bounds: per output texel, candidate and map; SH: per output texel,
+SH term and map), and from it the time a whole bake would take.
 
     python benchmarks/bench_bake.py [--size N] [--tile T] [--maps K]
 """
@@ -16,7 +17,7 @@ import numpy as np
 from arsim.core.gl import create_gl_context
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
-from arsim.lighting.accurate import Tile
+from arsim.lighting.accurate import Tile, tiles
 from arsim.lighting.gl_bake import GLAccurateBaker, GLShBaker
 
 EXPONENTS = (1, 5, 10, 20, 40, 80, 160, 320, 640, 1280)
@@ -47,13 +48,15 @@ def main() -> None:
         ctx.finish()
         cpu = 1000 * (time.perf_counter() - start)
         gl = query.elapsed / 1e6
-        terms = baker.order ** 2 if isinstance(baker, GLShBaker) else baker.inputs(tile)
-        per = gl * 1e6 / (args.tile ** 2 * terms * len(exponents))
-        whole = per * 1e-9 * baker.inside.sum() * len(exponents) * (
-            baker.order ** 2 if isinstance(baker, GLShBaker) else
-            np.mean([baker.inputs(t) for t in (tile,)]))
-        print(f"  {name:14s} tile GL {gl:9.2f} ms (CPU {cpu:9.2f})   {per:7.2f} ns per texel x term x map"
-              f"   whole bake ~{whole:8.1f} s of GL time")
+        per = cpu * 1e6 / (args.tile ** 2 * baker.inputs(tile) * len(exponents))
+        # The whole bake: every disk texel, each summing the terms its tile visits (accurate and bounds:
+        # the input texels within reach of the tile, from a quarter of the disk at its centre to three
+        # quarters at its rim).
+        visits = np.mean([baker.inputs(t) for t in tiles(args.size, args.tile) if baker.inside[
+            t.row0:t.row0 + t.size, t.col0:t.col0 + t.size].any()])
+        whole = per * 1e-9 * baker.inside.sum() * len(exponents) * visits
+        print(f"  {name:14s} tile {cpu:9.2f} ms (timer query {gl:9.2f})   {per:7.2f} ns per texel x term x map"
+              f"   {visits:9.0f} terms per texel on average   whole bake ~{whole:8.1f} s")
         baker.release()
 
 

@@ -103,3 +103,37 @@ def test_a_tile_summed_in_ranges_over_several_calls_equals_it_summed_at_once(gl,
     assert max_relative(b, reference) < 1e-3
     whole.release()
     parts.release()
+
+
+def test_a_tile_of_a_512_probe_sums_all_its_input_texels(gl):
+    """A 512² probe has 206 000 input texels; llvmpipe ends a shader's loops after 65 535 iterations, so
+    a single draw over them all summed only the first third. Each draw now takes at most PASS_INPUTS."""
+    from arsim.lighting.gl_bake import PASS_INPUTS
+
+    big = to_layout(read_hdr(ENVMAPS[1]), "anglemap", 512)
+    tile = Tile(64, 128, 4)  # looks up: three quarters of the disk lies within 90 degrees
+    baker = GLAccurateBaker(big, [1, 80], gl)
+    assert baker.inputs(tile) > 2 * 65535 and baker.inputs(tile) > 3 * PASS_INPUTS
+    baker.bake_tile(tile)
+    test = baker.read()[:, 64:68, 128:132]
+    reference = accurate_maps(big, [1, 80], tile=tile)[:, 64:68, 128:132]
+    assert max_relative(test, reference) < 1e-3
+    baker.release()
+
+
+@pytest.mark.parametrize("threshold", [None, 0.03])
+def test_spans_merged_to_fit_the_uniform_block_give_the_same_sums(gl, env, threshold, monkeypatch):
+    """More spans than a draw takes: the closest are merged, and the texels between add nothing."""
+    import arsim.lighting.gl_bake as gl_bake
+
+    tile = Tile(8, 8, 8)
+    whole = GLAccurateBaker(env, EXPONENTS, gl, threshold)
+    whole.bake_tile(tile)
+    monkeypatch.setattr(gl_bake, "MAX_SPANS", 4)
+    merged = GLAccurateBaker(env, EXPONENTS, gl, threshold)
+    assert len(merged._tile_spans(tile)) > 4
+    assert len(merged._range_spans(tile, 0, merged.inputs(tile))) <= 4
+    merged.bake_tile(tile)
+    np.testing.assert_array_equal(merged.read(), whole.read())
+    whole.release()
+    merged.release()

@@ -25,6 +25,8 @@ from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh import sh_coefficients
 
 MAX_MAPS_PER_PASS = 8  # the colour attachments every GL 4.3 has
+MAX_SPANS = 2048  # spans of input texels a draw takes: 16 KiB, the uniform block every GL 4.3 allows
+PASS_INPUTS = 32768  # input texels a draw sums at most (with MAX_SPANS, loop iterations below 65 535)
 COEFFICIENT_ROW = 1024  # texels per row of the SH coefficient texture
 
 
@@ -116,31 +118,35 @@ class GLBaker:
 
 class GLAccurateBaker(GLBaker):
     """Alg. 4.1/4.2: the accurate maps, or with bounds_threshold the bounds-optimised ones (lobe values
-    below it dropped, and only the input texels in the widest kept lobe's cone around the tile visited).
-    A tile may be summed in ranges of its input texels over several calls (bake_range), its sums added
-    by blending, and divided when the last range is in."""
+    below it dropped). A pass visits only the input texels that can reach the tile: within 90 degrees of
+    one of its texels (accurate: the others give f = 0), or within the cone of the widest kept lobe
+    (bounds). A tile may be summed in ranges of those over several calls (bake_range), its sums added by
+    blending, and divided when the last range is in."""
 
     shader = "bake_accurate.frag"
     splits_inputs = True
 
     def __init__(self, env: np.ndarray, exponents: Sequence[float], ctx=None, bounds_threshold: float | None = None):
-        super().__init__(env, exponents, ctx, ["BOUNDS"] if bounds_threshold is not None else [])
+        super().__init__(env, exponents, ctx, [f"MAX_SPANS {MAX_SPANS}", *(["BOUNDS"] if bounds_threshold is not None else [])])
         self.threshold = bounds_threshold
+        # The widest cone around a tile's texels whose input texels add anything: the hemisphere, or the
+        # smallest exponent's lobe down to the threshold.
+        self.cone = np.pi / 2 if bounds_threshold is None else float(np.arccos(bounds_threshold ** (1.0 / min(self.exponents))))
         weights = anglemap_solid_angles(self.n)[self.inside]
-        self.in_dirs = anglemap_directions(self.n)[self.inside]  # float64, for the bounds candidates
+        self.in_dirs = anglemap_directions(self.n)[self.inside]  # float64, for the tiles' spans
         probe = np.concatenate([self.in_dirs, weights[:, None]], axis=1).astype("f4")
         radiance = np.concatenate([env[self.inside, :3].astype(np.float64) * weights[:, None],
                                    np.zeros((len(weights), 1))], axis=1).astype("f4")
         self.count = len(weights)
         self.probe = self.ctx.buffer(probe.tobytes())
         self.radiance = self.ctx.buffer(radiance.tobytes())
-        self.candidates = self.ctx.buffer(reserve=4)
-        self.candidate_lists: dict[Tile, np.ndarray] = {}
-        self.listed: Tile | None = None  # the tile whose list the candidate buffer holds
+        self.span_lists: dict[Tile, np.ndarray] = {}
+        self.spans = self.ctx.buffer(reserve=16 * (MAX_SPANS // 2))
         self.sums = [self.ctx.texture((self.n, self.n), 4, dtype="f4") for _ in self.exponents]
         self.resolvers = []
         for group, program, _, _ in self.passes:
             program["exponents"].value = [self.exponents[k] for k in group]
+            program["Spans"].binding = 0
             if "threshold" in program:
                 program["threshold"].value = bounds_threshold
             sums_fbo = self.ctx.framebuffer([self.sums[k] for k in group])
@@ -153,46 +159,77 @@ class GLAccurateBaker(GLBaker):
         self.resources += [self.probe, self.radiance, *self.sums]
 
     def inputs(self, tile: Tile) -> int:
-        """How many input texels a pass over this tile visits: all, or (bounds) the tile's candidates."""
-        return self.count if self.threshold is None else len(self._tile_candidates(tile))
+        """How many input texels a pass over this tile visits."""
+        spans = self._tile_spans(tile)
+        return int((spans[:, 1] - spans[:, 0]).sum())
 
-    def _tile_candidates(self, tile: Tile) -> np.ndarray:
-        """Input texels within the cone of the widest lobe kept by the threshold (the smallest exponent's)
-        around any of the tile's directions: what accurate.py's bounds method visits."""
-        if tile not in self.candidate_lists:
+    def _tile_spans(self, tile: Tile) -> np.ndarray:
+        """(R, 2) [start, end) of the input texels within the cone around any of the tile's directions, in
+        index order (the order of the NumPy reference's sums)."""
+        if tile not in self.span_lists:
             rr = slice(tile.row0, tile.row0 + tile.size)
             cc = slice(tile.col0, tile.col0 + tile.size)
             block = self.out_dirs[rr, cc][self.inside[rr, cc]]
-            found = np.zeros(0, dtype=np.int32)
+            spans = np.zeros((0, 2), dtype=np.int64)
             if len(block):
                 centre = block.mean(axis=0)
                 centre /= np.linalg.norm(centre)
                 spread = float(np.arccos(np.clip(block @ centre, -1.0, 1.0)).max())
-                cone = float(np.arccos(self.threshold ** (1.0 / min(self.exponents))))
-                found = np.flatnonzero(self.in_dirs @ centre >= np.cos(min(np.pi, cone + spread))).astype(np.int32)
-            self.candidate_lists[tile] = found
-        return self.candidate_lists[tile]
+                # (a margin for the float32 dot products on the GL side: a texel at the cone's edge adds 0)
+                near = self.in_dirs @ centre >= np.cos(min(np.pi, self.cone + spread)) - 1e-6
+                edges = np.flatnonzero(np.diff(np.concatenate([[0], near.astype(np.int8), [0]])))
+                spans = edges.reshape(-1, 2)
+            self.span_lists[tile] = spans
+        return self.span_lists[tile]
+
+    def _range_spans(self, tile: Tile, first: int, count: int) -> np.ndarray:
+        """The tile's spans cut to its visited texels first .. first+count-1, at most MAX_SPANS of them
+        (the closest merged: the texels between add nothing, as f = 0 or below the threshold there)."""
+        spans = self._tile_spans(tile)
+        lengths = spans[:, 1] - spans[:, 0]
+        ends = np.cumsum(lengths)
+        starts = ends - lengths
+        keep = (ends > first) & (starts < first + count)
+        cut = spans[keep].copy()
+        cut[:, 0] += np.maximum(first - starts[keep], 0)
+        cut[:, 1] -= np.maximum(ends[keep] - (first + count), 0)
+        while len(cut) > MAX_SPANS:
+            gaps = cut[1:, 0] - cut[:-1, 1]
+            join = np.zeros(len(cut), bool)
+            join[1:][gaps <= np.partition(gaps, len(cut) - MAX_SPANS - 1)[len(cut) - MAX_SPANS - 1]] = True
+            group = np.cumsum(~join) - 1
+            merged = np.empty((group[-1] + 1, 2), dtype=cut.dtype)
+            merged[:, 0] = cut[~join, 0]
+            merged[:, 1] = np.maximum.reduceat(cut[:, 1], np.flatnonzero(~join))
+            cut = merged
+        return cut
 
     def bake_range(self, tile: Tile, first: int = 0, count: int | None = None, last: bool = True) -> None:
-        """Add the sums over input texels first .. first+count-1 (all: None) to the tile's, and with last,
-        divide them into the maps."""
+        """Add the sums over the visited texels first .. first+count-1 (all: None) to the tile's, and with
+        last, divide them into the maps."""
         count = self.inputs(tile) - first if count is None else count
         self.probe.bind_to_storage_buffer(0)
         self.radiance.bind_to_storage_buffer(1)
-        if self.threshold is not None and self.listed != tile and tile.size > 0:
-            # A buffer of its own for each list: llvmpipe lets a write into a buffer that queued draws
-            # still read reach them (a tiled bake then mixed the tiles' lists).
-            self.candidates.release()
-            self.candidates = self.ctx.buffer(self._tile_candidates(tile).tobytes() or bytes(4))
-            self.listed = tile
-        self.candidates.bind_to_storage_buffer(2)
         self.directions.use(0)
         self.ctx.enable(self.ctx.BLEND)
         self.ctx.blend_func = self.ctx.ONE, self.ctx.ONE
-        for (group, program, vao, _), (_, _, sums_fbo) in zip(self.passes, self.resolvers):
-            program["directions"].value = 0
-            program["first"].value, program["count"].value = first, count if tile.size > 0 else 0
-            self._draw(tile, program, vao, sums_fbo)
+        # A draw per PASS_INPUTS of the range: llvmpipe ends a shader's loops after 65 535 iterations in
+        # all (a 512² probe has 206 000 input texels); the draws' sums add by blending.
+        for start in range(first, first + count, PASS_INPUTS) if tile.size > 0 else [first]:
+            spans = (self._range_spans(tile, start, min(PASS_INPUTS, first + count - start)) if tile.size > 0
+                     else np.zeros((0, 2), np.int64))
+            # A buffer of its own for each draw: llvmpipe lets a write into a buffer that queued draws
+            # still read reach them (a tiled bake then mixed the tiles' spans).
+            # (The whole block's size: a GL may refuse a draw whose uniform buffer is smaller.)
+            block = np.zeros((MAX_SPANS, 2), dtype="i4")
+            block[:len(spans)] = spans
+            self.spans.release()
+            self.spans = self.ctx.buffer(block.tobytes())
+            self.spans.bind_to_uniform_block(0)
+            for (group, program, vao, _), (_, _, sums_fbo) in zip(self.passes, self.resolvers):
+                program["directions"].value = 0
+                program["span_count"].value = len(spans)
+                self._draw(tile, program, vao, sums_fbo)
         self.ctx.disable(self.ctx.BLEND)
         if last:
             for (group, _, _, maps_fbo), (resolver, vao, _) in zip(self.passes, self.resolvers):
@@ -201,7 +238,7 @@ class GLAccurateBaker(GLBaker):
                 self._draw(tile, resolver, vao, maps_fbo)
 
     def release(self) -> None:
-        self.candidates.release()
+        self.spans.release()
         for resolver, vao, fbo in self.resolvers:
             vao.release()
             fbo.release()

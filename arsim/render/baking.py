@@ -7,6 +7,7 @@ the baked maps replace the ones the objects were lit with meanwhile (the app sta
 
 from __future__ import annotations
 
+import time
 from collections import deque
 from dataclasses import dataclass
 
@@ -17,17 +18,18 @@ from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, Tile, tiles
 from arsim.lighting.gl_bake import GLAccurateBaker, GLShBaker
 
 BAKE_METHODS = ("accurate", "bounds", "sh")
-AUTO_UNIT = 16  # the tile side `auto` schedules in (or the map's side), split into quadrants where needed
-AUTO_FIRST = 4  # the side of auto's first tile, which measures the GL time per unit of work
+AUTO_UNIT = 16  # the tile side `auto` schedules in (or the map's side), split where needed
+AUTO_FIRST = 4  # auto's first piece, which measures the time per unit of work, is split down to this side
 # The smallest tile auto splits down to: llvmpipe runs fragment shaders on 4 x 4 blocks (and GPUs on 2 x 2
 # quads in warps of 32 or 64), so a smaller tile costs as much as a block: 1 x 1 tiles made a 128² bake
 # 16 times slower.
 BLOCK = 4
 AUTO_MIN = BLOCK
-# Below AUTO_MIN, auto sums a tile's input texels in ranges over several frames, halved down to this many.
+# Auto sums an accurate (or bounds) tile's input texels in ranges over several frames, halved down to this
+# many.
 MIN_RANGE = 256
 AUTO_SAFETY = 1.25  # predicted cost x this must fit: GL time per unit of work varies from tile to tile
-TILE_OVERHEAD_MS = 0.1  # GL time a tile's passes cost whatever their size (measured on llvmpipe: 0.05-0.1)
+TILE_OVERHEAD_MS = 0.1  # the time a piece's draws cost whatever their size (measured on llvmpipe: 0.05-0.1)
 AUTO_STALL_FRAMES = 30  # after this many frames without room for a tile, bake one anyway (the bake must end)
 
 
@@ -114,20 +116,21 @@ class LoopBaker:
         return self.works[piece]
 
     def _split(self) -> bool:
-        """Split the head of the queue: a whole tile into its four quadrants (row by row, the thesis's
-        order) down to AUTO_MIN, then (accurate and bounds) its input texels into halves down to
-        MIN_RANGE, summed over several frames; False when it cannot be split."""
+        """Split the head of the queue: (accurate and bounds) its input texels into halves down to
+        MIN_RANGE, summed over several frames; (SH) a whole tile into its four quadrants (row by row, the
+        thesis's order) down to AUTO_MIN; False when it cannot be split. Ranges keep the tile whole: a
+        wider tile costs less per texel (a draw's fixed costs and llvmpipe's 4 x 4 blocks)."""
         piece = self.queue[0]
         tile = piece.tile
-        if piece.count is None and tile.size > AUTO_MIN:
+        if not self.gl.splits_inputs:
+            if tile.size <= AUTO_MIN:
+                return False
             self.queue.popleft()
             half = tile.size // 2
             for dr, dc in reversed([(0, 0), (0, half), (half, 0), (half, half)]):
                 self.queue.appendleft(Piece(Tile(tile.row0 + dr, tile.col0 + dc, half)))
             return True
-        if not self.gl.splits_inputs:
-            return False
-        count = self.gl.inputs(tile) if piece.count is None else piece.count
+        count = self.gl.inputs(tile) - piece.first if piece.count is None else piece.count
         if count <= MIN_RANGE:
             return False
         self.queue.popleft()
@@ -170,16 +173,20 @@ class LoopBaker:
             self.idle_frames = 0
         else:
             batch = [self.queue.popleft()]
+        self.ctx.finish()
+        start = time.perf_counter()
         with self.query:
             for piece in batch:
                 self.gl.bake_range(piece.tile, piece.first, piece.count, piece.last)
         self.ctx.finish()
-        elapsed = self.query.elapsed / 1e6
-        self.last_gl_ms = elapsed
-        self.gl_ms_total += elapsed
+        # The schedule follows the time the render thread waits for the bake, which is what the budget
+        # holds: on llvmpipe, a timer query can miss part of a draw spread over its threads.
+        waited = 1000 * (time.perf_counter() - start)
+        self.last_gl_ms = self.query.elapsed / 1e6
+        self.gl_ms_total += self.last_gl_ms
         work = sum(self._work(piece) for piece in batch)
         if work > 0:
-            self.cost_per_work.append(max(elapsed - TILE_OVERHEAD_MS * len(batch), 0.0) / work)
+            self.cost_per_work.append(max(waited - TILE_OVERHEAD_MS * len(batch), 0.0) / work)
         self.texels_done += sum(self._texels(piece.tile) for piece in batch if piece.last)
         return len(batch)
 
