@@ -53,6 +53,28 @@ def test_the_baked_maps_replace_the_ones_in_use_when_complete(probe):
         np.testing.assert_allclose(held(s), expected, rtol=1e-3, atol=1e-7)
 
 
+@pytest.mark.parametrize("method", ["accurate", "sh"])
+def test_auto_bakes_every_tile_of_both_lanes(method):
+    """Auto takes pieces from the maps' left and right halves (two lanes from 128² up); when it is done,
+    every texel equals a bake of the whole map in one call."""
+    from arsim.lighting.gl_bake import gl_accurate_maps, gl_sh_maps
+
+    ctx = create_gl_context()
+    probe = to_layout(read_hdr(ENVMAPS[1]), "anglemap", 128)
+    baker = LoopBaker(probe, EXPONENTS, BakeSettings(method, tile=None, sh_order=8), ctx)
+    assert len(baker.lanes) == 2 and all(baker.lanes)
+    baker.warm_up()
+    frames = 0
+    while not baker.done:
+        baker.step(30.0)
+        frames += 1
+        assert frames < 5000
+    whole = (gl_accurate_maps(probe, EXPONENTS, ctx=ctx) if method == "accurate" else
+             gl_sh_maps(probe, EXPONENTS, 8, ctx=ctx))
+    np.testing.assert_allclose(baker.maps(), whole, rtol=1e-4, atol=1e-6 * np.abs(whole).max())
+    baker.release()
+
+
 def test_the_progress_display_shows_black_tiles_while_baking(probe):
     ctx = create_gl_context()
     camera = CameraIntrinsics.from_fov(320, 240, 60.0)

@@ -76,7 +76,7 @@ class LoopBaker:
         else:
             threshold = settings.bounds_threshold if settings.method == "bounds" else None
             self.gl = GLAccurateBaker(probe, self.exponents, ctx, threshold)
-        all_tiles = tiles(n, settings.tile or min(AUTO_UNIT, n))
+        all_tiles = list(tiles(n, settings.tile or min(AUTO_UNIT, n)))
         if settings.tile is None and n >= 2 * LANE_SPLIT:
             # auto bakes the left and right halves side by side: llvmpipe shades each 64 x 64 screen tile
             # on one thread, so pieces from both halves in a frame keep both cores busy (about 1.5x).
@@ -147,28 +147,28 @@ class LoopBaker:
         return True
 
     def _auto_batch(self, available_ms: float) -> list:
-        """The pieces predicted to fit: from the heads of the lanes in turn, splitting a lane's head while
-        even it alone would not fit, so that the work per frame follows the time left however costly a
-        texel is."""
+        """The pieces predicted to fit: each lane gets an equal share of the time left and fills it from
+        its head, splitting the head while even it alone would not fit, so that the work per frame
+        follows the time left however costly a texel is."""
         lanes = [lane for lane in self.lanes if lane]
         if not self.cost_per_work:  # nothing measured yet: a small piece, to measure
             while lanes[0][0].tile.size > AUTO_FIRST and self._split(lanes[0]):
                 pass
             return [lanes[0].popleft()]
-        batch, spent = [], 0.0
+        batch = []
         cost = max(self.cost_per_work) * AUTO_SAFETY
-        taken = {id(lane): 0 for lane in lanes}
-        while lanes:
-            for lane in list(lanes):
+        share = available_ms / len(lanes)
+        for lane in lanes:
+            spent = 0.0
+            taken = 0
+            while lane:
                 predicted = self._work(lane[0]) * cost + TILE_OVERHEAD_MS
-                if spent + predicted <= available_ms:
+                if spent + predicted <= share:
                     batch.append(lane.popleft())
                     spent += predicted
-                    taken[id(lane)] += 1
-                    if not lane:
-                        lanes.remove(lane)
-                elif taken[id(lane)] or not self._split(lane):
-                    lanes.remove(lane)
+                    taken += 1
+                elif taken or not self._split(lane):
+                    break
         return batch
 
     def step(self, available_ms: float) -> int:
