@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 from pathlib import Path
@@ -17,6 +18,7 @@ from arsim.core.image_stats import image_stats
 from arsim.core.progress import progress_bar
 from arsim.core.resample import LAYOUTS, detect_layout, to_layout
 from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_comparison
+from arsim.evaluate.diff import DEFAULT_MAX_FLIP
 from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
 from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method
@@ -443,6 +445,76 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
 # arsim validate
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    from arsim.evaluate.diff import _frames_of, run_diff
+    from arsim.run.pipeline import run_scenario
+    from arsim.testing import update_baseline
+
+    scenario = load_scenario(args.scenario)
+    if args.update_baseline and args.baseline is None:
+        raise ArsimError("--update-baseline needs --baseline DIR: the folder to write the baseline into")
+    if args.baseline is not None and not args.update_baseline:
+        _frames_of(args.baseline)  # a baseline without frames fails here, before any work
+    if args.recording is not None and not args.recording.is_dir():
+        raise ArsimError(f"{args.recording}: no such recording folder; make one with `arsim record SCENARIO -o REC`")
+    out = _output_dir(args.output)
+    source = str(args.scenario) if args.scenario is not None else "the embedded default scenario"
+
+    @contextlib.contextmanager
+    def stage(description):
+        with progress_bar(description, 1.0) as update:
+            yield update
+
+    manifest = run_scenario(scenario, source, out, args.recording, stage)
+    s = manifest["metrics"]["session"]
+    print(f"run {scenario.run.name} in {out}: {s['frames_total']} frames ({s['frames_lost']} with the tag lost), tracking p95 "
+          f"{s['tracking_rot_err_deg_p95']:.2f} degrees, FLIP against the truth frame {s['flip_mean']:.4f}; "
+          f"report {out / 'report' / 'index.html'}")
+    if args.update_baseline:
+        print(f"baseline written: {update_baseline(out, args.baseline)}")
+    elif args.baseline is not None:
+        result = run_diff(args.baseline, out, out / "diff", args.max_flip)
+        print(f"against the baseline {args.baseline}: {'passed' if result.passed else 'FAILED'}: {result.message()}; "
+              f"page {out / 'diff' / 'index.html'}")
+        return 0 if result.passed else 1
+    return 0
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from arsim.run.batch import check_ray_address, run_batch
+
+    for path in args.scenarios:
+        load_scenario(path)  # a scenario that does not parse fails here, before any run
+    if args.ray is not None:
+        check_ray_address(args.ray)
+    out = _output_dir(args.output)
+    with progress_bar(f"running {len(args.scenarios)} scenarios", len(args.scenarios)) as update:
+        finished = []
+
+        def done(result):
+            finished.append(result)
+            update(completed=len(finished), description=f"running scenarios: {Path(result['scenario']).stem} done")
+
+        summary = run_batch(args.scenarios, out, args.workers, args.ray, args.baselines, args.max_flip, done)
+    print(f"{len(summary['scenarios'])} scenarios in {summary['timing']['wall_s']:.1f} s ({summary['timing']['backend']}); "
+          f"failed: {', '.join(summary['failed']) or 'none'}; regressions: {', '.join(summary['regressions']) or 'none'}; "
+          f"summary {out / 'summary.md'}")
+    return 1 if summary["failed"] or summary["regressions"] else 0
+
+
+def cmd_diff(args: argparse.Namespace) -> int:
+    from arsim.evaluate.diff import run_diff
+
+    out = _output_dir(args.output) if args.output is not None else None
+    with progress_bar("comparing frames", 1.0) as update:
+        result = run_diff(args.a, args.b, out, args.max_flip, progress=lambda f: update(completed=f))
+    summary = result.summary()
+    where = f"; page {out / 'index.html'}" if out is not None else ""
+    print(f"{'passed' if result.passed else 'FAILED'}: {result.message()}\n"
+          f"FLIP mean over frames {summary['flip_mean']:.5f}, worst {summary['flip_max']:.5f} ({summary['worst_frame']}){where}")
+    return 0 if result.passed else 1
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     print(f"# {args.scenario or DEFAULT_SCENARIO}: valid; as resolved:")
@@ -572,6 +644,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frames", type=_positive("--max-frames"), metavar="K",
                    help="stop after K frames even if the bake is not complete (default: [profile] max_frames)")
     p.set_defaults(run=cmd_profile)
+
+    p = _command(sub, "run", "run a scenario end to end: record (or replay --recording), capture the probe, bake the maps of "
+                 "every method it names, run the AR session, evaluate every stage, and write the run directory with "
+                 "manifest.json and report/index.html; --baseline compares the frames with a baseline's",
+                 "arsim run -o run   (or: arsim run scenarios/indoor.toml -o run --baseline baselines/indoor)")
+    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help="scenario .toml (default: the embedded default scenario)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="run directory (created if missing)")
+    p.add_argument("--recording", type=Path, metavar="REC", help="replay this recording (`arsim record`) instead of recording anew")
+    p.add_argument("--baseline", type=Path, metavar="DIR", help="compare the run's frames with this baseline (a run directory)")
+    p.add_argument("--update-baseline", action="store_true", help="write the run's frames as the baseline DIR instead of comparing")
+    p.add_argument("--max-flip", type=float, default=DEFAULT_MAX_FLIP, metavar="X",
+                   help=f"with --baseline: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
+    p.set_defaults(run=cmd_run)
+
+    p = _command(sub, "batch", "run many scenarios end to end in parallel processes (or as tasks on a Ray cluster) and write "
+                 "one summary of all their metrics and regressions (summary.md, summary.html, summary.json)",
+                 "arsim batch scenarios/*.toml -o batch --workers 2   (or: ... --ray auto, --baselines baselines)")
+    p.add_argument("scenarios", type=Path, nargs="+", metavar="SCENARIO", help="scenario .toml files")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="batch folder: a run directory per scenario")
+    p.add_argument("--workers", type=_positive("--workers"), default=1, metavar="N", help="runs at once on this machine (default 1)")
+    p.add_argument("--ray", metavar="ADDRESS", help="run each scenario as a task on the Ray cluster at ADDRESS (host:port, or auto)")
+    p.add_argument("--baselines", type=Path, metavar="DIR", help="compare each run's frames with DIR/<scenario name>")
+    p.add_argument("--max-flip", type=float, default=DEFAULT_MAX_FLIP, metavar="X",
+                   help=f"with --baselines: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
+    p.set_defaults(run=cmd_batch)
+
+    p = _command(sub, "diff", "visual regression: compare two images, or the frames of two run directories matched by name, "
+                 "by FLIP (mean and 99th percentile), PSNR and the largest difference; writes a heatmap per frame that "
+                 "differs and an HTML page; exit status 1 when a frame's mean FLIP exceeds --max-flip",
+                 "arsim diff baseline run -o diff --max-flip 0.001   (or: arsim diff a.png b.png)")
+    p.add_argument("a", type=Path, metavar="A", help="the reference: an image, a run directory or a folder of frames")
+    p.add_argument("b", type=Path, metavar="B", help="what is compared with it (the same kind as A)")
+    p.add_argument("-o", "--output", type=Path, metavar="DIR", help="write heatmaps/, diff.json and index.html here")
+    p.add_argument("--max-flip", type=float, default=DEFAULT_MAX_FLIP, metavar="X",
+                   help=f"largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g}: any difference fails)")
+    p.set_defaults(run=cmd_diff)
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")

@@ -94,13 +94,16 @@ def markdown(runs: list[ProfileRun]) -> str:
     for run in runs:
         s = run.summary()
         b = s["bake"]
-        lines += [f"## Tile policy {run.label} ({run.method} maps)", "",
+        baking = any("bake" in r.cpu_ms for r in run.records)
+        lines += [f"## Tile policy {run.label} ({run.method} maps)" if baking else f"## {run.label} ({run.method} maps, no bake)", "",
                   f"- Frames: {s['frames']}; budget {s['budget_ms']:.1f} ms; over budget: {s['misses']} "
-                  f"({s['within_budget_pct']:.2f} % within)",
-                  "- Bake: " + (f"complete after {b['frames_to_finish']} frames, {b['seconds']:.2f} s; worst frame while "
-                                 f"baking {b['worst_frame_ms']:.3f} ms; {b['within_budget_pct_while_baking']:.2f} % of those "
-                                 f"frames within budget; GL time {b['gl_ms_total']:.1f} ms"
-                                 if b["completed"] else "not complete"), "",
+                  f"({s['within_budget_pct']:.2f} % within)"]
+        if baking:
+            lines.append("- Bake: " + (f"complete after {b['frames_to_finish']} frames, {b['seconds']:.2f} s; worst frame while "
+                                       f"baking {b['worst_frame_ms']:.3f} ms; {b['within_budget_pct_while_baking']:.2f} % of "
+                                       f"those frames within budget; GL time {b['gl_ms_total']:.1f} ms"
+                                       if b["completed"] else "not complete"))
+        lines += ["",
                   "| step | CPU p50 | CPU p95 | CPU p99 | CPU max | GL p50 | GL p95 | GL p99 | GL max | frames |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         rows = [("frame (steps 3-7)", s["frame_ms"], {})] + [(name, v["cpu"], v["gl"]) for name, v in s["steps"].items()]
@@ -151,7 +154,8 @@ def plot_timeline(run: ProfileRun, path: Path) -> None:
         ax.axvline(end - 1, color="tab:red", linewidth=1, label=f"bake complete (frame {end})")
     ax.set_xlabel("frame")
     ax.set_ylabel("render thread, ms")
-    ax.set_title(f"Frame time, tile policy {run.label} ({run.method} maps)")
+    baking = any("bake" in r.cpu_ms for r in run.records)
+    ax.set_title(f"Frame time, tile policy {run.label} ({run.method} maps)" if baking else f"Frame time, {run.label} ({run.method} maps)")
     ax.set_ylim(0, max(float(np.percentile(bottom, 99.5)) * 1.2, run.budget_ms * 1.3))
     ax.legend(loc="upper right", fontsize=8, ncol=2)
     fig.tight_layout()

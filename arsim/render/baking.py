@@ -30,7 +30,6 @@ AUTO_MIN = BLOCK
 MIN_RANGE = 256
 AUTO_SAFETY = 1.25  # predicted cost x this must fit: GL time per unit of work varies from tile to tile
 TILE_OVERHEAD_MS = 0.1  # the time a piece's draws cost whatever their size (measured on llvmpipe: 0.05-0.1)
-LANE_SPLIT = 64  # llvmpipe's screen tile: auto uses two lanes where each half of the maps is this wide
 AUTO_STALL_FRAMES = 30  # after this many frames without room for a tile, bake one anyway (the bake must end)
 
 
@@ -76,13 +75,7 @@ class LoopBaker:
         else:
             threshold = settings.bounds_threshold if settings.method == "bounds" else None
             self.gl = GLAccurateBaker(probe, self.exponents, ctx, threshold)
-        all_tiles = list(tiles(n, settings.tile or min(AUTO_UNIT, n)))
-        if settings.tile is None and n >= 2 * LANE_SPLIT:
-            # auto bakes the left and right halves side by side: llvmpipe shades each 64 x 64 screen tile
-            # on one thread, so pieces from both halves in a frame keep both cores busy (about 1.5x).
-            self.lanes = [deque(Piece(t) for t in all_tiles if (t.col0 < n // 2) == left) for left in (True, False)]
-        else:
-            self.lanes = [deque(Piece(t) for t in all_tiles)]
+        self.queue = deque(Piece(tile) for tile in tiles(n, settings.tile or min(AUTO_UNIT, n)))
         self.texels_total, self.texels_done = int(self.gl.inside.sum()), 0
         self.query = ctx.query(time=True)
         self.cost_per_work: deque[float] = deque(maxlen=8)  # measured GL ms per unit of work, recent tiles
@@ -97,7 +90,7 @@ class LoopBaker:
 
     @property
     def done(self) -> bool:
-        return not any(self.lanes)
+        return not self.queue
 
     @property
     def progress(self) -> float:
@@ -122,53 +115,46 @@ class LoopBaker:
             self.works[piece] = float(self._shaded(piece.tile)) * count
         return self.works[piece]
 
-    def _split(self, lane: deque) -> bool:
-        """Split the head of a lane: (accurate and bounds) its input texels into halves down to
+    def _split(self) -> bool:
+        """Split the head of the queue: (accurate and bounds) its input texels into halves down to
         MIN_RANGE, summed over several frames; (SH) a whole tile into its four quadrants (row by row, the
         thesis's order) down to AUTO_MIN; False when it cannot be split. Ranges keep the tile whole: a
         wider tile costs less per texel (a draw's fixed costs and llvmpipe's 4 x 4 blocks)."""
-        piece = lane[0]
+        piece = self.queue[0]
         tile = piece.tile
         if not self.gl.splits_inputs:
             if tile.size <= AUTO_MIN:
                 return False
-            lane.popleft()
+            self.queue.popleft()
             half = tile.size // 2
             for dr, dc in reversed([(0, 0), (0, half), (half, 0), (half, half)]):
-                lane.appendleft(Piece(Tile(tile.row0 + dr, tile.col0 + dc, half)))
+                self.queue.appendleft(Piece(Tile(tile.row0 + dr, tile.col0 + dc, half)))
             return True
         count = self.gl.inputs(tile) - piece.first if piece.count is None else piece.count
         if count <= MIN_RANGE:
             return False
-        lane.popleft()
+        self.queue.popleft()
         half = count // 2
-        lane.appendleft(Piece(tile, piece.first + half, count - half, piece.last))
-        lane.appendleft(Piece(tile, piece.first, half, False))
+        self.queue.appendleft(Piece(tile, piece.first + half, count - half, piece.last))
+        self.queue.appendleft(Piece(tile, piece.first, half, False))
         return True
 
     def _auto_batch(self, available_ms: float) -> list:
-        """The pieces predicted to fit: each lane gets an equal share of the time left and fills it from
-        its head, splitting the head while even it alone would not fit, so that the work per frame
-        follows the time left however costly a texel is."""
-        lanes = [lane for lane in self.lanes if lane]
+        """The pieces predicted to fit: from the head of the queue, splitting the head while even it
+        alone would not fit, so that the work per frame follows the time left however costly a texel is."""
+        batch, spent = [], 0.0
         if not self.cost_per_work:  # nothing measured yet: a small piece, to measure
-            while lanes[0][0].tile.size > AUTO_FIRST and self._split(lanes[0]):
+            while self.queue[0].tile.size > AUTO_FIRST and self._split():
                 pass
-            return [lanes[0].popleft()]
-        batch = []
+            return [self.queue.popleft()]
         cost = max(self.cost_per_work) * AUTO_SAFETY
-        share = available_ms / len(lanes)
-        for lane in lanes:
-            spent = 0.0
-            taken = 0
-            while lane:
-                predicted = self._work(lane[0]) * cost + TILE_OVERHEAD_MS
-                if spent + predicted <= share:
-                    batch.append(lane.popleft())
-                    spent += predicted
-                    taken += 1
-                elif taken or not self._split(lane):
-                    break
+        while self.queue:
+            predicted = self._work(self.queue[0]) * cost + TILE_OVERHEAD_MS
+            if spent + predicted <= available_ms:
+                batch.append(self.queue.popleft())
+                spent += predicted
+            elif batch or not self._split():
+                break
         return batch
 
     def step(self, available_ms: float) -> int:
@@ -183,10 +169,10 @@ class LoopBaker:
                 self.idle_frames += 1
                 if self.idle_frames < AUTO_STALL_FRAMES:
                     return 0
-                batch = [next(lane for lane in self.lanes if lane).popleft()]  # (the bake must end)
+                batch = [self.queue.popleft()]  # (the smallest piece by now: the bake must end)
             self.idle_frames = 0
         else:
-            batch = [self.lanes[0].popleft()]
+            batch = [self.queue.popleft()]
         self.ctx.finish()
         start = time.perf_counter()
         with self.query:

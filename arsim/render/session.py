@@ -51,6 +51,7 @@ class SessionResult:
     flip: np.ndarray  # (K,) mean FLIP inside the mask; nan where no object was drawn
     step_ms: dict[str, list[float]] = field(default_factory=dict)  # CPU ms per step per frame
     gl_ms: dict[str, list[float]] = field(default_factory=dict)  # GL ms per GL step per frame
+    records: list = field(default_factory=list)  # the render loop's FrameRecord per frame (the profile's input)
 
     def metrics(self) -> dict:
         drawn = np.isfinite(self.flip)
@@ -134,7 +135,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
     (out_dir / "frames").mkdir(parents=True, exist_ok=True)
     step_ms = {name: [] for name in STEPS}
     gl_ms = {name: [] for name in GL_STEPS}
-    poses, flips = [], np.full(count, np.nan)
+    poses, flips, records = [], np.full(count, np.nan), []
     fps = rec.meta["camera"].get("fps", 30.0) / settings.every
     shading = Shading(settings.key, settings.white, settings.log_average)
     loop = FrameLoop(ctx, tracker, captured, shading, settings.overlay, settings.method)
@@ -144,6 +145,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
             frame = read_frame(rec.folder / rec.frames[k]["file"])
             pose, record = loop.run(frame, int(k))
             poses.append(pose)
+            records.append(record)
             for name, ms in record.cpu_ms.items():
                 step_ms[name].append(ms)
             for name, ms in record.gl_ms.items():
@@ -171,7 +173,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
             if n % 10 == 0 or n == count - 1:
                 progress((n + 1) / count)
         video.release()
-    return SessionResult(measure_poses(rec, poses, indices), indices, flips, step_ms, gl_ms)
+    return SessionResult(measure_poses(rec, poses, indices), indices, flips, step_ms, gl_ms, records)
 
 
 def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, objects: list[SceneObject],

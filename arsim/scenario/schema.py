@@ -147,11 +147,12 @@ def _check_value(name: str, value: Any, meta: dict, where: str, written: Any) ->
         if isinstance(v, (int, float)) and not isinstance(v, bool):
             if (meta["min"] is not None and v < meta["min"]) or (meta["max"] is not None and v > meta["max"]):
                 raise ScenarioError(f"{where} {name} = {_describe(written)} is out of range: allowed {_allowed(meta)}")
-    if meta["choices"] is not None and value not in meta["choices"]:
-        options = ", ".join(_describe(c) for c in meta["choices"])
-        hint = difflib.get_close_matches(str(value), [str(c) for c in meta["choices"]], n=1)
-        mean = f"; did you mean {_describe(hint[0])}?" if hint else ""
-        raise ScenarioError(f"{where} {name} = {_describe(value)} is not allowed: use one of {options}{mean}")
+    for v in (value if isinstance(value, tuple) else (value,)) if meta["choices"] is not None else ():
+        if v not in meta["choices"]:  # (an array's choices hold for each of its entries)
+            options = ", ".join(_describe(c) for c in meta["choices"])
+            hint = difflib.get_close_matches(str(v), [str(c) for c in meta["choices"]], n=1)
+            mean = f"; did you mean {_describe(hint[0])}?" if hint else ""
+            raise ScenarioError(f"{where} {name} = {_describe(value)} is not allowed: use one of {options}{mean}")
 
 
 def _unknown_key(key: str, known: list[str], where: str, top_level: bool) -> ScenarioError:

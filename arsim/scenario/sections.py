@@ -204,6 +204,8 @@ class RenderSection:
     white: float = setting(2.0, min=0.001, max=1e6, help="Reinhard's L_white")
     log_average: bool = setting(False, help="tone-map with Reinhard's log-average luminance instead of the mean (thesis)")
     overlay: bool = setting(False, help="draw the overlay (frame time, map state) at the frames' top left")
+    methods: tuple[str, ...] = setting((), choices=MAP_METHODS,
+                                       help="arsim run: map methods baked and measured besides those the objects use")
     objects: tuple[RenderObjectSection, ...] = subsection(
         RenderObjectSection, array=True,
         default=(RenderObjectSection("sphere_row", position_m=(0.0, -0.14), size_m=0.016, kd=(0.15, 0.15, 0.15),

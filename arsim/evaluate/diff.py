@@ -1,0 +1,212 @@
+"""Visual regression: two images, or the frames of two run directories matched by name, compared by FLIP
+(NVIDIA's flip-evaluator, LDR), PSNR and the largest absolute difference, with a FLIP heatmap per frame
+that differs and an HTML page showing them side by side.
+
+FLIP costs most of a second on a whole 640 x 480 frame, so it is evaluated on the box around the pixels
+that differ, widened beyond the reach of its filters; elsewhere the two frames are equal and FLIP is 0.
+Identical frames cost a byte comparison.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from arsim.core.errors import ArsimError
+from arsim.core.files import write_bytes_atomic, write_text_atomic
+from arsim.core.png import png_bytes
+
+IMAGE_SUFFIXES = (".png",)
+DEFAULT_MAX_FLIP = 0.0  # a frame fails when its mean FLIP exceeds this: by default, any difference
+FLIP_MARGIN = 32  # pixels around the differing ones: beyond FLIP's filters at its default 67 pixels per degree
+
+
+@dataclass(frozen=True)
+class FrameDiff:
+    name: str
+    flip_mean: float
+    flip_p99: float
+    psnr_db: float  # inf when the frames are equal
+    max_abs: int  # the largest difference of an 8-bit channel
+    differing_pixels: int
+    heatmap: str | None = None  # relative to the diff's folder, where one was written
+
+    def exceeds(self, max_flip: float) -> bool:
+        return self.flip_mean > max_flip
+
+
+@dataclass
+class DiffResult:
+    a: str
+    b: str
+    max_flip: float
+    frames: list[FrameDiff] = field(default_factory=list)
+    only_in_a: list[str] = field(default_factory=list)
+    only_in_b: list[str] = field(default_factory=list)
+
+    @property
+    def failed(self) -> list[FrameDiff]:
+        return [f for f in self.frames if f.exceeds(self.max_flip)]
+
+    @property
+    def passed(self) -> bool:
+        return not self.failed and not self.only_in_a and not self.only_in_b
+
+    def summary(self) -> dict:
+        flips = [f.flip_mean for f in self.frames]
+        worst = max(self.frames, key=lambda f: f.flip_mean, default=None)
+        return {
+            "a": self.a, "b": self.b, "max_flip": self.max_flip, "passed": self.passed,
+            "frames": len(self.frames), "frames_differing": sum(f.differing_pixels > 0 for f in self.frames),
+            "frames_over_threshold": len(self.failed), "only_in_a": self.only_in_a, "only_in_b": self.only_in_b,
+            "flip_mean": float(np.mean(flips)) if flips else 0.0,
+            "flip_max": worst.flip_mean if worst else 0.0, "worst_frame": worst.name if worst else None,
+            "per_frame": [{**asdict(f), "psnr_db": None if math.isinf(f.psnr_db) else f.psnr_db} for f in self.frames],
+        }
+
+    def message(self) -> str:
+        """One paragraph for a terminal or a failed test: which frames, how much, where the heatmaps are."""
+        lines = [f"{len(self.frames)} frames compared, {len(self.failed)} over FLIP {self.max_flip:g}"]
+        for f in sorted(self.failed, key=lambda f: -f.flip_mean)[:5]:
+            lines.append(f"  {f.name}: FLIP mean {f.flip_mean:.5f}, p99 {f.flip_p99:.4f}, PSNR {f.psnr_db:.1f} dB, "
+                         f"max difference {f.max_abs}, {f.differing_pixels} pixels differ"
+                         + (f"; heatmap {f.heatmap}" if f.heatmap else ""))
+        if len(self.failed) > 5:
+            lines.append(f"  ... and {len(self.failed) - 5} more")
+        for side, names in (("a", self.only_in_a), ("b", self.only_in_b)):
+            if names:
+                lines.append(f"  {len(names)} frames only in {side} ({getattr(self, side)}), first {names[0]}")
+        return "\n".join(lines)
+
+
+def read_image(path: Path) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of an 8-bit PNG."""
+    import cv2
+
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise ArsimError(f"{path}: not an image arsim can read; give 8-bit PNG files")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def _frames_of(folder: Path) -> dict[str, Path]:
+    """A run directory's frames (its frames/ folder) or a folder of images, by name."""
+    source = folder / "frames" if (folder / "frames").is_dir() else folder
+    found = {p.name: p for p in sorted(source.iterdir()) if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()}
+    if not found:
+        raise ArsimError(f"{folder}: no frames (PNG files) in it or in its frames/ folder; give a run directory or a folder of frames")
+    return found
+
+
+def image_pairs(a: Path, b: Path) -> tuple[list[tuple[str, Path, Path]], list[str], list[str]]:
+    """The frames to compare (name, a's, b's), and the names found only in a or only in b."""
+    for path in (a, b):
+        if not path.exists():
+            raise ArsimError(f"{path}: no such file or folder; give two images or two run directories")
+    if a.is_dir() != b.is_dir():
+        raise ArsimError(f"{a} and {b}: one is a folder and the other a file; give two images or two run directories")
+    if not a.is_dir():
+        return [(b.name, a, b)], [], []
+    frames_a, frames_b = _frames_of(a), _frames_of(b)
+    common = [name for name in frames_a if name in frames_b]
+    return ([(name, frames_a[name], frames_b[name]) for name in common],
+            [n for n in frames_a if n not in frames_b], [n for n in frames_b if n not in frames_a])
+
+
+def _magma(error: np.ndarray) -> np.ndarray:
+    from matplotlib import colormaps
+
+    return (255 * colormaps["magma"](np.clip(error, 0.0, 1.0))[..., :3] + 0.5).astype(np.uint8)
+
+
+def compare_images(a: np.ndarray, b: np.ndarray, name: str = "") -> tuple[FrameDiff, np.ndarray | None]:
+    """The metrics of b against a (the reference), and the FLIP error map (H, W) where they differ."""
+    import flip_evaluator
+
+    if a.shape != b.shape:
+        raise ArsimError(f"{name or 'the images'}: sizes differ ({a.shape[1]}x{a.shape[0]} against "
+                         f"{b.shape[1]}x{b.shape[0]}); compare frames rendered at the same size")
+    differs = (a != b).any(axis=-1)
+    count = int(differs.sum())
+    if count == 0:
+        return FrameDiff(name, 0.0, 0.0, math.inf, 0, 0), None
+    rows, cols = np.flatnonzero(differs.any(axis=1)), np.flatnonzero(differs.any(axis=0))
+    box = (slice(max(rows[0] - FLIP_MARGIN, 0), rows[-1] + FLIP_MARGIN + 1),
+           slice(max(cols[0] - FLIP_MARGIN, 0), cols[-1] + FLIP_MARGIN + 1))
+    error_box, _, _ = flip_evaluator.evaluate(np.ascontiguousarray(a[box], dtype=np.float32) / 255,
+                                              np.ascontiguousarray(b[box], dtype=np.float32) / 255, "LDR", applyMagma=False)
+    error_box = np.asarray(error_box)
+    error = np.zeros(a.shape[:2], np.float32)
+    error[box] = error_box[..., 0] if error_box.ndim == 3 else error_box
+    diff = a.astype(np.int16) - b.astype(np.int16)
+    mse = float(np.mean(diff.astype(np.float64) ** 2))
+    return (FrameDiff(name, float(error.mean()), float(np.percentile(error, 99)), 10 * math.log10(255.0 ** 2 / mse),
+                      int(np.abs(diff).max()), count), error)
+
+
+def run_diff(a: Path, b: Path, out_dir: Path | None = None, max_flip: float = DEFAULT_MAX_FLIP,
+             progress: Callable[[float], None] = lambda fraction: None) -> DiffResult:
+    """Compare b against a; with out_dir, write heatmaps/<frame>.png for the frames that differ,
+    diff.json and index.html (a, b and the heatmap side by side)."""
+    if max_flip < 0:
+        raise ArsimError(f"--max-flip {max_flip} is negative; give 0 (any difference fails) or more")
+    pairs, only_a, only_b = image_pairs(a, b)
+    result = DiffResult(str(a), str(b), max_flip, only_in_a=only_a, only_in_b=only_b)
+    if out_dir is not None:
+        (out_dir / "heatmaps").mkdir(parents=True, exist_ok=True)
+    for k, (name, path_a, path_b) in enumerate(pairs):
+        frame, error = compare_images(read_image(path_a), read_image(path_b), name)
+        if error is not None and out_dir is not None:
+            heatmap = Path("heatmaps") / f"{Path(name).stem}.png"
+            write_bytes_atomic(out_dir / heatmap, png_bytes(_magma(error)))
+            frame = FrameDiff(**{**asdict(frame), "heatmap": str(heatmap)})
+        result.frames.append(frame)
+        progress((k + 1) / len(pairs))
+    if out_dir is not None:
+        write_text_atomic(out_dir / "diff.json", json.dumps(result.summary(), indent=2) + "\n")
+        write_text_atomic(out_dir / "index.html", diff_page(result, pairs, out_dir))
+    return result
+
+
+def diff_page(result: DiffResult, pairs: list[tuple[str, Path, Path]], out_dir: Path) -> str:
+    """The HTML page: the verdict, a table of every frame, and for each frame that differs a, b and its
+    heatmap side by side (images linked from where they are)."""
+    paths = {name: (pa, pb) for name, pa, pb in pairs}
+
+    def link(path: Path) -> str:
+        return html.escape(Path(os.path.relpath(path.resolve(), out_dir.resolve())).as_posix())
+
+    verdict = "PASSED" if result.passed else "FAILED"
+    rows, figures = [], []
+    for f in result.frames:
+        over = f.exceeds(result.max_flip)
+        psnr = "∞" if math.isinf(f.psnr_db) else f"{f.psnr_db:.1f}"
+        rows.append(f"<tr class=\"{'over' if over else ''}\"><td>{html.escape(f.name)}</td><td>{f.flip_mean:.5f}</td>"
+                    f"<td>{f.flip_p99:.4f}</td><td>{psnr}</td><td>{f.max_abs}</td><td>{f.differing_pixels}</td></tr>")
+        if f.heatmap:
+            pa, pb = paths[f.name]
+            figures.append(f"<h3>{html.escape(f.name)}: FLIP {f.flip_mean:.5f}</h3><div class=\"row\">"
+                           f"<figure><img src=\"{link(pa)}\"><figcaption>a</figcaption></figure>"
+                           f"<figure><img src=\"{link(pb)}\"><figcaption>b</figcaption></figure>"
+                           f"<figure><img src=\"{html.escape(f.heatmap)}\"><figcaption>FLIP (magma: black 0, yellow 1)"
+                           f"</figcaption></figure></div>")
+    missing = "".join(f"<p class=\"over\">{len(names)} frames only in {side}: {html.escape(', '.join(names[:10]))}</p>"
+                      for side, names in (("a", result.only_in_a), ("b", result.only_in_b)) if names)
+    return f"""<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>arsim diff: {verdict}</title>
+<style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse}} td,th{{border:1px solid #ccc;padding:2px 8px;text-align:right}}
+.over{{color:#b00;font-weight:bold}} .row{{display:flex;gap:8px}} figure{{margin:0}} img{{max-width:420px}}</style></head>
+<body><h1>arsim diff: {verdict}</h1>
+<p>a: {html.escape(result.a)}<br>b: {html.escape(result.b)}<br>{len(result.frames)} frames compared; {len(result.failed)} with a
+mean FLIP over {result.max_flip:g}; {sum(f.differing_pixels > 0 for f in result.frames)} differ at all.</p>{missing}
+<h2>Frames that differ</h2>{''.join(figures) or '<p>None: every frame is equal.</p>'}
+<h2>Every frame</h2><table><tr><th>frame</th><th>FLIP mean</th><th>FLIP p99</th><th>PSNR (dB)</th><th>max |a-b|</th><th>pixels differing</th></tr>
+{''.join(rows)}</table></body></html>
+"""

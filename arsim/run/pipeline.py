@@ -1,0 +1,170 @@
+"""`arsim run`: a scenario end to end into one run directory (DESIGN.md section 4): the recording (or a
+recording replayed), the captured probe against the truth, the maps of every method the scenario names
+baked from the probe, the AR session's frames, its render-loop profile, the metrics of every stage, the
+report and manifest.json.
+
+Stages take a `stage(description)` context manager that yields update(fraction): the command line
+shows it as a progress bar naming the stage.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import platform
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+
+from arsim import __version__
+from arsim.core.conventions import anglemap_disk_mask
+from arsim.core.errors import ArsimError
+from arsim.core.files import write_text_atomic
+from arsim.core.resample import to_layout
+from arsim.evaluate.metrics import map_error
+from arsim.scenario.loader import scenario_to_toml
+from arsim.scenario.sections import Scenario
+
+STAGES = ("recording", "capture", "maps", "session", "report")
+
+
+@contextlib.contextmanager
+def quiet_stage(description: str) -> Iterator[Callable[..., None]]:
+    yield lambda completed=None, description=None: None
+
+
+def _files_under(out: Path, roles: dict[str, str]) -> list[dict]:
+    """Every file of the run with its role: the first folder (or file name) it lies under names it."""
+    files = []
+    for path in sorted(p for p in out.rglob("*") if p.is_file() and not p.name.startswith(".")):
+        rel = path.relative_to(out).as_posix()
+        role = next((r for prefix, r in roles.items() if rel == prefix or rel.startswith(prefix + "/")), "other")
+        files.append({"path": rel, "role": role, "bytes": path.stat().st_size})
+    return files
+
+
+FILE_ROLES = {
+    "recording": "the recorded sweep and AR path (frames, IMU streams, truth)",
+    "capture/env.exr": "the captured HDR light probe (angle map)",
+    "capture/truth.exr": "the true environment at the probe's size",
+    "capture": "capture metrics and plots",
+    "maps": "maps baked from the captured probe, a folder per method",
+    "frames": "frames rendered by the AR session",
+    "session.mp4": "the AR session's video",
+    "profile": "the render loop's profile: per step CPU and GL time",
+    "metrics.json": "every stage's metrics",
+    "scenario.toml": "the scenario as resolved",
+    "report": "the HTML report",
+}
+
+
+def versions() -> dict:
+    import cv2
+    import moderngl
+
+    from arsim.core.gl import create_gl_context
+
+    return {"arsim": __version__, "python": platform.python_version(), "numpy": np.__version__,
+            "opencv": cv2.__version__, "moderngl": moderngl.__version__,
+            "gl_renderer": create_gl_context().info["GL_RENDERER"]}
+
+
+def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | None = None,
+                 stage: Callable = quiet_stage) -> dict:
+    """Run every stage into out; returns the manifest (also written to out/manifest.json)."""
+    from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
+    from arsim.capture.response import response_error
+    from arsim.evaluate.capture_report import filled, write_capture
+    from arsim.evaluate.profile import ProfileRun, write_profile
+    from arsim.lighting.bake_output import write_bake
+    from arsim.lighting.methods import MapParameters, bake
+    from arsim.render.content import scene_objects
+    from arsim.render.session import SessionSettings, maps_needed, run_session
+    from arsim.run.report import write_report
+    from arsim.scenario.environment import load_environment
+    from arsim.sensors.camera import ResponseCurve
+    from arsim.sensors.recording import load_recording, record, recording_segments
+
+    r = scenario.render
+    if not scenario.ar.enabled and recording is None:
+        raise ArsimError(f"{source}: [ar] enabled = false; a run needs the AR path: set it to true")
+    objects = scene_objects(r)  # a mesh that cannot be read fails here, before any work
+    out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out / "scenario.toml", scenario_to_toml(scenario))
+
+    # 1. The recording: made now, or one made before (`arsim record`) replayed.
+    if recording is None:
+        recording_segments(scenario)
+        with stage("1/5 recording the sweep and the AR path") as update:
+            record(scenario, out / "recording", progress=lambda f: update(completed=f))
+        recording = out / "recording"
+    elif not (recording / "ar").is_dir():
+        raise ArsimError(f"{recording}: no ar/ folder; replay a recording made with [ar] enabled = true (arsim record)")
+    sweep, ar = load_recording(recording), load_recording(recording / "ar")
+    recorded = recording_scenario(sweep)  # the sensors as recorded, whatever the scenario given says
+
+    # 2. The capture, measured against the truth.
+    settings = CaptureSettings.of(recorded)
+    with stage("2/5 capturing the light probe") as update:
+        result = capture(sweep, settings, progress=lambda f, c: update(completed=f))
+    truth_probe = load_environment(dataclasses.replace(recorded.environment, probe_size=settings.size))
+    cam = recorded.device.camera
+    true_response = ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
+    capture_metrics = write_capture(result, truth_probe, response_error(result.response, true_response), out / "capture")
+
+    # 3. The maps of every method named, from the captured probe; each measured against the same method's
+    # maps of the true environment (what the capture costs) and the true environment's accurate maps.
+    acc = result.accumulator
+    probe = to_layout(filled(acc.probe(), acc.covered()), "anglemap", r.map_size)
+    truth = load_environment(dataclasses.replace(recorded.environment, probe_size=r.map_size))
+    needed = maps_needed(objects, r.method)
+    exponents = sorted({s for ss in needed.values() for s in ss})
+    methods = list(dict.fromkeys([*needed, *r.methods]))
+    maps, truth_maps, map_metrics = {}, {}, {}
+    inside = anglemap_disk_mask(r.map_size)
+    with stage(f"3/5 baking the maps ({', '.join(methods)})") as update:
+        params = MapParameters()
+        reference = bake(truth, exponents, "accurate", params).maps
+        for k, name in enumerate(methods):
+            baked = bake(probe, exponents, name, params)
+            (out / "maps" / name).mkdir(parents=True, exist_ok=True)
+            write_bake(out / "maps" / name, exponents, name, params, baked, "capture/env.exr")
+            true_maps = reference if name == "accurate" else bake(truth, exponents, name, params).maps
+            maps[name] = dict(zip(exponents, baked.maps))
+            truth_maps[name] = dict(zip(exponents, true_maps))
+            map_metrics[name] = {
+                "seconds": baked.seconds_total,
+                "per_exponent": {f"{s:g}": {
+                    "error_vs_truth_same_method_pct": map_error(true_maps[e][inside], baked.maps[e][inside]).mean_percent,
+                    "error_vs_truth_accurate_pct": map_error(reference[e][inside], baked.maps[e][inside]).mean_percent,
+                    "method_error_on_truth_pct": map_error(reference[e][inside], true_maps[e][inside]).mean_percent,
+                } for e, s in enumerate(exponents)}}
+            update(completed=(k + 1) / len(methods))
+
+    # 4. The AR session over the AR path, and its render-loop profile.
+    session_settings = SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay)
+    with stage("4/5 rendering the AR session") as update:
+        session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, objects, session_settings,
+                              progress=lambda f: update(completed=f))
+    (out / "profile").mkdir(exist_ok=True)
+    write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")
+
+    # 5. Metrics, report and manifest.
+    session_metrics = session.metrics()
+    metrics = {"capture": {k: v for k, v in capture_metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
+               "maps": map_metrics, "session": session_metrics}
+    write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
+    with stage("5/5 writing the report") as update:
+        write_report(out, scenario, source, metrics, session, maps)
+    manifest = {
+        "scenario": {"source": source, "name": scenario.run.name, "resolved": "scenario.toml"},
+        "seed": scenario.run.seed,
+        "recording": str(recording) if recording != out / "recording" else "recording",
+        "versions": versions(),
+        "metrics": metrics,
+        "files": _files_under(out, FILE_ROLES),
+    }
+    write_text_atomic(out / "manifest.json", json.dumps(manifest, indent=2, default=float) + "\n")
+    return manifest

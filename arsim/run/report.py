@@ -1,0 +1,147 @@
+"""The run's report: one self-contained HTML page (report/index.html, images embedded) with the scenario,
+the captured probe beside the truth, the maps per method, the chosen frames, the error tables, and the
+drift, tracking and frame-time plots."""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+from pathlib import Path
+
+import numpy as np
+
+from arsim.core.files import atomic_path, write_text_atomic
+from arsim.scenario.loader import scenario_to_toml
+from arsim.scenario.sections import Scenario
+
+
+def _img(path: Path, alt: str, width: int | None = None) -> str:
+    if not path.is_file():
+        return f"<p>({html.escape(alt)}: not written)</p>"
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    size = f' style="max-width:{width}px"' if width else ""
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"{size}>'
+
+
+def _num(value, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "n/a"
+    return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
+
+
+def _table(header: list[str], rows: list[list]) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def plot_maps(maps: dict[str, dict[float, np.ndarray]], path: Path) -> None:
+    """A grid: a row per method, a column per exponent, each map shown by Reinhard's operator."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    methods = list(maps)
+    exponents = sorted(next(iter(maps.values())))
+    fig, axes = plt.subplots(len(methods), len(exponents), figsize=(1.6 * len(exponents), 1.7 * len(methods)),
+                             dpi=90, squeeze=False)
+    for i, name in enumerate(methods):
+        for j, s in enumerate(exponents):
+            m = np.clip(maps[name][s], 0, None)
+            shown = (m / (1 + m)) ** (1 / 2.2)
+            ax = axes[i][j]
+            ax.imshow(np.clip(shown, 0, 1))
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title("irradiance" if s == 1 else f"s = {s:g}", fontsize=8)
+            if j == 0:
+                ax.set_ylabel(name, fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+
+
+def plot_tracking(session, path: Path) -> None:
+    """Rotation and position error of the tracked tag per frame; where the tag was lost."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = session.tracking
+    frames = session.frames
+    fig, (a, b) = plt.subplots(2, 1, figsize=(9, 4.5), dpi=100, sharex=True)
+    lost = ~t.found
+    for ax, values, label in ((a, t.rot_err_deg, "rotation error (degrees)"), (b, t.trans_err_pct, "position error (% of distance)")):
+        shown = np.where(np.isfinite(values), values, np.nan)
+        ax.plot(frames, shown, linewidth=0.8)
+        ax.set_ylabel(label, fontsize=8)
+        if lost.any():
+            top = np.nanmax(shown) if np.isfinite(shown).any() else 1.0
+            ax.fill_between(frames, 0, top, where=lost, color="tab:red", alpha=0.15, step="mid", label="tag lost")
+            ax.legend(fontsize=8, loc="upper right")
+    b.set_xlabel("frame of the AR path")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+
+
+def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, session, maps: dict) -> Path:
+    report = out / "report"
+    report.mkdir(exist_ok=True)
+    plot_maps(maps, report / "maps.png")
+    plot_tracking(session, report / "tracking.png")
+    c, s = metrics["capture"], metrics["session"]
+    capture_rows = [[html.escape(k), html.escape(_num(v)) if not isinstance(v, list) else html.escape("; ".join(map(str, v)) or "none")]
+                    for k, v in c.items()]
+    map_rows = []
+    for name, m in metrics["maps"].items():
+        for exp, e in m["per_exponent"].items():
+            map_rows.append([name, "irradiance" if exp == "1" else f"s = {exp}", _num(e["error_vs_truth_same_method_pct"], 2),
+                             _num(e["error_vs_truth_accurate_pct"], 2), _num(e["method_error_on_truth_pct"], 2)])
+    session_rows = [[k, _num(s.get(k))] for k in ("frames_total", "frames_lost", "frames_tag_visible", "detection_rate_visible",
+                                                  "tracking_rot_err_deg_p95", "tracking_trans_err_pct_p95",
+                                                  "tracking_trans_err_mm_p95", "flip_mean")]
+    frames = sorted((out / "frames").glob("*.png"))
+    flip_of = dict(zip((int(k) for k in s["frames_rendered"]), s["flip_per_frame"]))
+    figures = "".join(f"<figure>{_img(f, f.name, 420)}<figcaption>frame {int(f.stem)}: FLIP "
+                      f"{_num(flip_of.get(int(f.stem)), 4) if flip_of.get(int(f.stem)) is not None else 'n/a (no object drawn)'}"
+                      f"</figcaption></figure>" for f in frames)
+    lost = s.get("frames_lost", 0)
+    page = f"""<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>arsim run: {html.escape(scenario.run.name)}</title>
+<style>body{{font-family:sans-serif;margin:2em;max-width:1200px}} table{{border-collapse:collapse;margin:0.5em 0}}
+td,th{{border:1px solid #ccc;padding:2px 8px}} td{{text-align:right}} td:first-child{{text-align:left}}
+.row{{display:flex;gap:8px;flex-wrap:wrap}} figure{{margin:0}} pre{{background:#f4f4f4;padding:8px;max-height:300px;overflow:auto}}
+nav a{{margin-right:1em}}</style></head>
+<body><h1>arsim run: {html.escape(scenario.run.name)}</h1>
+<p>Scenario {html.escape(source)}, seed {scenario.run.seed}. The AR session rendered {s['frames_total']} frames; the tag was
+lost in {lost} of them (no object drawn there). FLIP against the truth frame: {_num(s.get('flip_mean'), 4)}.</p>
+<nav><a href="#scenario">scenario</a><a href="#capture">capture</a><a href="#maps">maps</a><a href="#frames">frames</a>
+<a href="#errors">errors</a><a href="#plots">drift, tracking, frame time</a></nav>
+<h2 id="scenario">Scenario</h2><pre>{html.escape(scenario_to_toml(scenario))}</pre>
+<h2 id="capture">Captured probe and the truth</h2>{_img(out / 'capture' / 'probe_vs_truth.png', 'probe vs truth', 1100)}
+{_img(out / 'capture' / 'coverage.png', 'coverage', 500)}
+<h2 id="maps">Maps per method</h2><p>Baked from the captured probe (maps/&lt;method&gt;/), shown by Reinhard's operator.</p>
+{_img(report / 'maps.png', 'maps', 1100)}
+<h2 id="frames">Frames</h2><div class="row">{figures}</div>
+<h2 id="errors">Errors</h2>
+<h3>Capture</h3>{_table(['metric', 'value'], capture_rows)}
+<h3>Maps (mean relative error, %)</h3>
+<p>Against the same method on the true environment (what the capture costs), against the true environment's accurate
+maps (capture and method together), and the method's own error on the true environment.</p>
+{_table(['method', 'map', 'vs truth, same method', 'vs truth, accurate', 'method on truth'], map_rows)}
+<h3>AR session</h3>{_table(['metric', 'value'], session_rows)}
+<h2 id="plots">Drift, tracking and frame time</h2>
+<h3>IMU drift and its correction</h3>{_img(out / 'capture' / 'drift.png', 'drift', 900)}
+<h3>Tracking</h3>{_img(report / 'tracking.png', 'tracking', 900)}
+<h3>Frame time</h3>{_img(out / 'profile' / 'timeline.png', 'frame time', 1000)}
+</body></html>
+"""
+    write_text_atomic(report / "index.html", page)
+    return report / "index.html"

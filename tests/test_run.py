@@ -1,0 +1,187 @@
+"""`arsim run` end to end on a small scenario (the run directory, manifest, report, replay of a recording
+giving byte-identical frames), visual regression (`arsim diff`, --baseline, the arsim_baseline fixture),
+and bad input refused in one line."""
+
+import json
+
+import numpy as np
+import pytest
+
+from arsim.core.png import png_bytes
+from arsim.evaluate.diff import compare_images, run_diff
+from arsim.testing import assert_frames_match, update_baseline
+from tests.conftest import ENVMAPS
+from tests.test_cli import arsim, assert_one_line_error
+
+SMALL = """
+[run]
+name = "small"
+seed = 7
+[environment]
+map = "{env}"
+probe_size = 128
+[capture]
+duration_s = 1.0
+capture_size = 128
+[device.camera]
+width = 320
+height = 240
+fps = 10.0
+[ar]
+duration_s = 4.0
+near_m = 0.3
+far_m = 0.6
+[[ar.look_away]]
+start_s = 1.5
+end_s = 2.5
+[render]
+map_size = 32
+methods = ["mipmap"]
+[[render.objects]]
+kind = "torus"
+[[render.objects]]
+kind = "sphere"
+position_m = [0.17, 0.0]
+size_m = 0.04
+exponent = {exponent}
+"""
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """A run, the same scenario replayed from its recording, and a run with the sphere's exponent changed."""
+    root = tmp_path_factory.mktemp("runs")
+    (root / "s.toml").write_text(SMALL.format(env=ENVMAPS[1].as_posix(), exponent=80.0))
+    (root / "t.toml").write_text(SMALL.format(env=ENVMAPS[1].as_posix(), exponent=10.0))
+    results = {"a": arsim("run", root / "s.toml", "-o", root / "a"),
+               "record": arsim("record", root / "s.toml", "-o", root / "rec"),
+               "changed": arsim("run", root / "t.toml", "-o", root / "changed", "--recording", root / "a" / "recording")}
+    results["replay"] = arsim("run", root / "s.toml", "-o", root / "replay", "--recording", root / "rec")
+    for name, r in results.items():
+        assert r.returncode == 0, (name, r.stderr)
+    return root
+
+
+def test_run_writes_the_run_directory_manifest_and_report(runs):
+    out = runs / "a"
+    for path in ("manifest.json", "metrics.json", "scenario.toml", "recording/frames.csv", "capture/env.exr",
+                 "capture/drift.png", "maps/fast/irradiance.exr", "maps/fast/bake.json", "maps/mipmap/reflection_s80.exr",
+                 "session.mp4", "profile/profile.md", "profile/trace.json", "profile/timeline.png", "report/index.html"):
+        assert (out / path).is_file(), path
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["seed"] == 7 and manifest["scenario"]["name"] == "small"
+    roles = {f["path"]: f["role"] for f in manifest["files"]}
+    assert roles["capture/env.exr"].startswith("the captured") and roles["session.mp4"].startswith("the AR session")
+    session = manifest["metrics"]["session"]
+    assert session["frames_lost"] > 0 and session["frames_total"] == 41  # 4 s at 10 frames/s; the look-away
+    assert set(manifest["metrics"]["maps"]) == {"fast", "mipmap"}
+    page = (out / "report" / "index.html").read_text()
+    for section in ("Scenario", "Captured probe and the truth", "Maps per method", "Frames", "Errors",
+                    "IMU drift", "Tracking", "Frame time"):
+        assert section in page, section
+    assert page.count("data:image/png;base64,") >= 8  # self-contained: every image embedded
+    assert "the tag was\nlost in" in page
+
+
+def test_a_recording_replayed_gives_byte_identical_frames(runs):
+    frames = sorted(p.name for p in (runs / "a" / "frames").glob("*.png"))
+    assert len(frames) == 4
+    for name in frames:
+        assert (runs / "a" / "frames" / name).read_bytes() == (runs / "replay" / "frames" / name).read_bytes(), name
+
+
+def test_diff_of_a_run_against_itself_passes_with_flip_zero(runs, tmp_path):
+    r = arsim("diff", runs / "a", runs / "replay", "-o", tmp_path / "d")
+    assert r.returncode == 0, r.stdout + r.stderr
+    summary = json.loads((tmp_path / "d" / "diff.json").read_text())
+    assert summary["passed"] and summary["flip_max"] == 0.0 and summary["frames"] == 4
+
+
+def test_diff_against_a_changed_exponent_fails_and_lights_up_that_object_only(runs, tmp_path):
+    r = arsim("diff", runs / "a", runs / "changed", "-o", tmp_path / "d")
+    assert r.returncode == 1, r.stdout + r.stderr
+    summary = json.loads((tmp_path / "d" / "diff.json").read_text())
+    assert not summary["passed"] and summary["flip_max"] > 0
+    # Where the frames differ: on one object. The objects are the pixels where the frame differs from the
+    # camera's (the background pass copies it); the FLIP error above 0.05 lies within one of them (widened
+    # by FLIP's filters), in every frame where the two are apart on screen.
+    import cv2
+
+    from arsim.evaluate.diff import read_image
+
+    checked = 0
+    for frame in summary["per_frame"]:
+        name = frame["name"]
+        a, b = read_image(runs / "a" / "frames" / name), read_image(runs / "changed" / "frames" / name)
+        camera = read_image(runs / "a" / "recording" / "ar" / "frames" / name)
+        objects = cv2.dilate((a != camera).any(axis=-1).astype(np.uint8), np.ones((9, 9), np.uint8))
+        count, labels = cv2.connectedComponents(objects)
+        _, error = compare_images(a, b)
+        if count - 1 != 2 or error is None:  # (up close the sphere overlaps the torus on screen)
+            continue
+        hot = error > 0.05
+        assert hot.sum() > 10
+        lit = {int(label) for label in np.unique(labels[hot])}
+        assert len(lit) == 1 and 0 not in lit  # every hot pixel on one object
+        # The other object changes a little, and only a little: the tone mapping's average luminance
+        # spans every object's pixels, so a brighter sphere darkens the torus by a few 8-bit steps.
+        assert error[labels == 3 - lit.pop()].max() < 0.05
+        checked += 1
+    assert checked >= 1
+    worst = summary["worst_frame"]
+    assert (tmp_path / "d" / "heatmaps" / worst).is_file() and "FAILED" in (tmp_path / "d" / "index.html").read_text()
+
+
+def test_run_against_a_baseline_and_the_fixture(runs, tmp_path):
+    baseline = tmp_path / "baseline"
+    update_baseline(runs / "a", baseline)
+    assert sorted(p.name for p in (baseline / "frames").iterdir()) == sorted(p.name for p in (runs / "a" / "frames").iterdir())
+    assert assert_frames_match(runs / "replay", baseline).passed
+    with pytest.raises(AssertionError, match=r"do not match the baseline.*\n.*over FLIP 0\n  \d+\.png: FLIP mean"):
+        assert_frames_match(runs / "changed", baseline, out_dir=tmp_path / "d")
+
+
+def test_the_arsim_baseline_fixture_in_a_users_suite(runs, tmp_path):
+    """The plugin as a user's suite sees it: a passing and a failing comparison."""
+    import subprocess
+    import sys
+
+    test_file = tmp_path / "test_user.py"
+    test_file.write_text(f"""
+def test_same(arsim_baseline):
+    arsim_baseline({str(runs / 'replay')!r}, {str(runs / 'a')!r})
+
+def test_changed(arsim_baseline):
+    arsim_baseline({str(runs / 'changed')!r}, {str(runs / 'a')!r})
+""")
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", str(test_file)], capture_output=True,
+                       text=True, cwd=tmp_path)
+    assert "1 failed, 1 passed" in r.stdout, r.stdout
+    assert "do not match the baseline" in r.stdout and "heatmap heatmaps/" in r.stdout
+
+
+def test_diff_of_two_images(tmp_path):
+    a = np.zeros((40, 60, 3), np.uint8)
+    b = a.copy()
+    b[10:14, 20:24] = 200
+    (tmp_path / "a.png").write_bytes(png_bytes(a))
+    (tmp_path / "b.png").write_bytes(png_bytes(b))
+    result = run_diff(tmp_path / "a.png", tmp_path / "b.png", max_flip=0.5)
+    frame = result.frames[0]
+    assert frame.differing_pixels == 16 and frame.max_abs == 200 and 0 < frame.flip_mean < 0.5 and result.passed
+    assert 10 < frame.psnr_db < 40
+    assert not run_diff(tmp_path / "a.png", tmp_path / "b.png").passed  # default: any difference fails
+
+
+def test_bad_inputs_are_refused_in_one_line(tmp_path, runs):
+    (tmp_path / "broken.toml").write_text("[run\nname = ")
+    assert_one_line_error(arsim("run", tmp_path / "broken.toml", "-o", tmp_path / "o"), "broken.toml")
+    (tmp_path / "empty").mkdir()
+    assert_one_line_error(arsim("run", runs / "s.toml", "-o", tmp_path / "o", "--baseline", tmp_path / "empty"),
+                          "no frames")
+    (tmp_path / "small.png").write_bytes(png_bytes(np.zeros((10, 10, 3), np.uint8)))
+    (tmp_path / "big.png").write_bytes(png_bytes(np.zeros((12, 10, 3), np.uint8)))
+    assert_one_line_error(arsim("diff", tmp_path / "small.png", tmp_path / "big.png"), "sizes differ")
+    assert_one_line_error(arsim("diff", tmp_path / "small.png", tmp_path / "nothing.png"), "no such file")
+    assert_one_line_error(arsim("run", runs / "s.toml", "-o", tmp_path / "o", "--recording", tmp_path / "nothing"),
+                          "no such recording")
