@@ -126,18 +126,12 @@ def _magma(error: np.ndarray) -> np.ndarray:
     return (255 * colormaps["magma"](np.clip(error, 0.0, 1.0))[..., :3] + 0.5).astype(np.uint8)
 
 
-def compare_images(a: np.ndarray, b: np.ndarray, name: str = "") -> tuple[FrameDiff, np.ndarray | None]:
-    """The metrics of b against a (the reference), and the FLIP error map (H, W) where they differ."""
+def flip_map(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """(H, W) LDR FLIP of 8-bit b against a, evaluated on the box around the pixels `where` widened by
+    FLIP_MARGIN, 0 outside it (where the frames are equal, or outside what is measured)."""
     import flip_evaluator
 
-    if a.shape != b.shape:
-        raise ArsimError(f"{name or 'the images'}: sizes differ ({a.shape[1]}x{a.shape[0]} against "
-                         f"{b.shape[1]}x{b.shape[0]}); compare frames rendered at the same size")
-    differs = (a != b).any(axis=-1)
-    count = int(differs.sum())
-    if count == 0:
-        return FrameDiff(name, 0.0, 0.0, math.inf, 0, 0), None
-    rows, cols = np.flatnonzero(differs.any(axis=1)), np.flatnonzero(differs.any(axis=0))
+    rows, cols = np.flatnonzero(where.any(axis=1)), np.flatnonzero(where.any(axis=0))
     box = (slice(max(rows[0] - FLIP_MARGIN, 0), rows[-1] + FLIP_MARGIN + 1),
            slice(max(cols[0] - FLIP_MARGIN, 0), cols[-1] + FLIP_MARGIN + 1))
     error_box, _, _ = flip_evaluator.evaluate(np.ascontiguousarray(a[box], dtype=np.float32) / 255,
@@ -145,6 +139,19 @@ def compare_images(a: np.ndarray, b: np.ndarray, name: str = "") -> tuple[FrameD
     error_box = np.asarray(error_box)
     error = np.zeros(a.shape[:2], np.float32)
     error[box] = error_box[..., 0] if error_box.ndim == 3 else error_box
+    return error
+
+
+def compare_images(a: np.ndarray, b: np.ndarray, name: str = "") -> tuple[FrameDiff, np.ndarray | None]:
+    """The metrics of b against a (the reference), and the FLIP error map (H, W) where they differ."""
+    if a.shape != b.shape:
+        raise ArsimError(f"{name or 'the images'}: sizes differ ({a.shape[1]}x{a.shape[0]} against "
+                         f"{b.shape[1]}x{b.shape[0]}); compare frames rendered at the same size")
+    differs = (a != b).any(axis=-1)
+    count = int(differs.sum())
+    if count == 0:
+        return FrameDiff(name, 0.0, 0.0, math.inf, 0, 0), None
+    error = flip_map(a, b, differs)
     diff = a.astype(np.int16) - b.astype(np.int16)
     mse = float(np.mean(diff.astype(np.float64) ** 2))
     return (FrameDiff(name, float(error.mean()), float(np.percentile(error, 99)), 10 * math.log10(255.0 ** 2 / mse),

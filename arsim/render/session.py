@@ -89,21 +89,12 @@ def check_maps(maps: dict[str, dict[float, np.ndarray]], needed: dict[str, list[
                              f"({held}); bake them: arsim bake PROBE.exr -o DIR --method {name} --spec {spec}")
 
 
-FLIP_MARGIN = 32  # pixels around the mask's bounding box: beyond FLIP's filters at its default 67 pixels per degree
-
-
 def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
     """Mean FLIP (LDR, sRGB inputs) of two 8-bit frames over the masked pixels, evaluated on the mask's
-    bounding box widened by FLIP_MARGIN (the whole frame costs most of a second at 640 x 480)."""
-    import flip_evaluator
+    bounding box widened beyond FLIP's filters (the whole frame costs most of a second at 640 x 480)."""
+    from arsim.evaluate.diff import flip_map
 
-    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-    box = (slice(max(rows[0] - FLIP_MARGIN, 0), rows[-1] + FLIP_MARGIN + 1),
-           slice(max(cols[0] - FLIP_MARGIN, 0), cols[-1] + FLIP_MARGIN + 1))
-    error, _, _ = flip_evaluator.evaluate(np.ascontiguousarray(reference[box], dtype=np.float32) / 255,
-                                          np.ascontiguousarray(test[box], dtype=np.float32) / 255, "LDR", applyMagma=False)
-    error = np.asarray(error)
-    return float((error[..., 0] if error.ndim == 3 else error)[mask[box]].mean())
+    return float(flip_map(reference, test, mask)[mask].mean())
 
 
 def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray) -> tuple:
