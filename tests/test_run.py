@@ -70,6 +70,7 @@ def test_run_writes_the_run_directory_manifest_and_report(runs):
         assert (out / path).is_file(), path
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["seed"] == 7 and manifest["scenario"]["name"] == "small"
+    assert set(manifest["seconds_per_stage"]) == {"recording", "capture", "maps", "session", "report"}
     roles = {f["path"]: f["role"] for f in manifest["files"]}
     assert roles["capture/env.exr"].startswith("the captured") and roles["session.mp4"].startswith("the AR session")
     session = manifest["metrics"]["session"]

@@ -13,6 +13,7 @@ import contextlib
 import dataclasses
 import json
 import platform
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -87,6 +88,16 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.sensors.camera import ResponseCurve
     from arsim.sensors.recording import load_recording, record, recording_segments
 
+    seconds: dict[str, float] = {}
+
+    @contextlib.contextmanager
+    def step(key: str, description: str):
+        """A stage shown by `stage` and timed into the manifest."""
+        start = time.perf_counter()
+        with stage(description) as update:
+            yield update
+        seconds[key] = round(time.perf_counter() - start, 2)
+
     r = scenario.render
     if not scenario.ar.enabled and recording is None:
         raise ArsimError(f"{source}: [ar] enabled = false; a run needs the AR path: set it to true")
@@ -97,7 +108,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     # 1. The recording: made now, or one made before (`arsim record`) replayed.
     if recording is None:
         recording_segments(scenario)
-        with stage("1/5 recording the sweep and the AR path") as update:
+        with step("recording", "1/5 recording the sweep and the AR path") as update:
             record(scenario, out / "recording", progress=lambda f: update(completed=f))
         recording = out / "recording"
     elif not (recording / "ar").is_dir():
@@ -107,7 +118,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
 
     # 2. The capture, measured against the truth.
     settings = CaptureSettings.of(recorded)
-    with stage("2/5 capturing the light probe") as update:
+    with step("capture", "2/5 capturing the light probe") as update:
         result = capture(sweep, settings, progress=lambda f, c: update(completed=f))
     truth_probe = load_environment(dataclasses.replace(recorded.environment, probe_size=settings.size))
     cam = recorded.device.camera
@@ -124,7 +135,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     methods = list(dict.fromkeys([*needed, *r.methods]))
     maps, truth_maps, map_metrics = {}, {}, {}
     inside = anglemap_disk_mask(r.map_size)
-    with stage(f"3/5 baking the maps ({', '.join(methods)})") as update:
+    with step("maps", f"3/5 baking the maps ({', '.join(methods)})") as update:
         params = MapParameters()
         reference = bake(truth, exponents, "accurate", params).maps
         for k, name in enumerate(methods):
@@ -145,7 +156,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
 
     # 4. The AR session over the AR path, and its render-loop profile.
     session_settings = SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay)
-    with stage("4/5 rendering the AR session") as update:
+    with step("session", "4/5 rendering the AR session") as update:
         session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, objects, session_settings,
                               progress=lambda f: update(completed=f))
     (out / "profile").mkdir(exist_ok=True)
@@ -156,13 +167,14 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     metrics = {"capture": {k: v for k, v in capture_metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
                "maps": map_metrics, "session": session_metrics}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
-    with stage("5/5 writing the report") as update:
+    with step("report", "5/5 writing the report") as update:
         write_report(out, scenario, source, metrics, session, maps)
     manifest = {
         "scenario": {"source": source, "name": scenario.run.name, "resolved": "scenario.toml"},
         "seed": scenario.run.seed,
         "recording": str(recording) if recording != out / "recording" else "recording",
         "versions": versions(),
+        "seconds_per_stage": seconds,
         "metrics": metrics,
         "files": _files_under(out, FILE_ROLES),
     }
