@@ -446,7 +446,7 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from arsim.evaluate.diff import _frames_of, run_diff
+    from arsim.evaluate.diff import frames_of, run_diff
     from arsim.run.pipeline import run_scenario
     from arsim.testing import update_baseline
 
@@ -454,7 +454,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.update_baseline and args.baseline is None:
         raise ArsimError("--update-baseline needs --baseline DIR: the folder to write the baseline into")
     if args.baseline is not None and not args.update_baseline:
-        _frames_of(args.baseline)  # a baseline without frames fails here, before any work
+        frames_of(args.baseline)  # a baseline without frames fails here, before any work
     if args.recording is not None and not args.recording.is_dir():
         raise ArsimError(f"{args.recording}: no such recording folder; make one with `arsim record SCENARIO -o REC`")
     out = _output_dir(args.output)

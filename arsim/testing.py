@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from arsim.core.errors import ArsimError
-from arsim.evaluate.diff import DEFAULT_MAX_FLIP, DiffResult, _frames_of, run_diff
+from arsim.evaluate.diff import DEFAULT_MAX_FLIP, DiffResult, frames_of, run_diff
 
 
 def assert_frames_match(frames: str | os.PathLike, baseline: str | os.PathLike, max_flip: float = DEFAULT_MAX_FLIP,
@@ -44,7 +44,7 @@ def assert_frames_match(frames: str | os.PathLike, baseline: str | os.PathLike, 
 
 def update_baseline(frames: str | os.PathLike, baseline: str | os.PathLike) -> Path:
     """Make the frames the baseline: baseline/frames/ holds copies of them (replacing what was there)."""
-    found = _frames_of(Path(frames))
+    found = frames_of(Path(frames))
     target = Path(baseline) / "frames"
     staging = Path(baseline) / ".frames.new"
     shutil.rmtree(staging, ignore_errors=True)

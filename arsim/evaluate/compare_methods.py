@@ -140,25 +140,30 @@ def _save_figure(fig, path: Path) -> None:
 
 def figure_grid(c: Comparison, path: Path) -> None:
     """Figure 6.4: rows = methods, columns = exponents, each map tone-mapped on its own."""
+    maps_grid(c.maps, c.exponents, path, f"Irradiance (s = 1) and reflection maps by method, {c.size}² angle maps")
+
+
+def maps_grid(maps: dict[str, np.ndarray], exponents: Sequence[float], path: Path, title: str) -> None:
+    """A row per method (its (E, N, N, 3) maps), a column per exponent, each map tone-mapped on its own."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = list(c.maps)
-    fig, axes = plt.subplots(len(names), len(c.exponents), figsize=(1.6 * len(c.exponents), 1.7 * len(names)),
+    names = list(maps)
+    fig, axes = plt.subplots(len(names), len(exponents), figsize=(1.6 * len(exponents), 1.7 * len(names)),
                              squeeze=False)
     for i, name in enumerate(names):
-        for j, s in enumerate(c.exponents):
+        for j, s in enumerate(exponents):
             ax = axes[i, j]
-            ax.imshow(tonemap_preview(c.maps[name][j]))
+            ax.imshow(tonemap_preview(maps[name][j]))
             ax.set_xticks([])
             ax.set_yticks([])
             if i == 0:
                 ax.set_title(f"s = {_fmt_exponent(s)}", fontsize=9)
             if j == 0:
                 ax.set_ylabel(name, fontsize=9)
-    fig.suptitle(f"Irradiance (s = 1) and reflection maps by method, {c.size}² angle maps", fontsize=10)
+    fig.suptitle(title, fontsize=10)
     _save_figure(fig, path)
     plt.close(fig)
 

@@ -96,7 +96,7 @@ def read_image(path: Path) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
-def _frames_of(folder: Path) -> dict[str, Path]:
+def frames_of(folder: Path) -> dict[str, Path]:
     """A run directory's frames (its frames/ folder) or a folder of images, by name."""
     source = folder / "frames" if (folder / "frames").is_dir() else folder
     found = {p.name: p for p in sorted(source.iterdir()) if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()}
@@ -114,7 +114,7 @@ def image_pairs(a: Path, b: Path) -> tuple[list[tuple[str, Path, Path]], list[st
         raise ArsimError(f"{a} and {b}: one is a folder and the other a file; give two images or two run directories")
     if not a.is_dir():
         return [(b.name, a, b)], [], []
-    frames_a, frames_b = _frames_of(a), _frames_of(b)
+    frames_a, frames_b = frames_of(a), frames_of(b)
     common = [name for name in frames_a if name in frames_b]
     return ([(name, frames_a[name], frames_b[name]) for name in common],
             [n for n in frames_a if n not in frames_b], [n for n in frames_b if n not in frames_a])

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from arsim.core.files import atomic_path, write_text_atomic
+from arsim.evaluate.compare_methods import maps_grid
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
@@ -34,35 +35,6 @@ def _table(header: list[str], rows: list[list]) -> str:
     head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
-
-
-def plot_maps(maps: dict[str, dict[float, np.ndarray]], path: Path) -> None:
-    """A grid: a row per method, a column per exponent, each map shown by Reinhard's operator."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    methods = list(maps)
-    exponents = sorted(next(iter(maps.values())))
-    fig, axes = plt.subplots(len(methods), len(exponents), figsize=(1.6 * len(exponents), 1.7 * len(methods)),
-                             dpi=90, squeeze=False)
-    for i, name in enumerate(methods):
-        for j, s in enumerate(exponents):
-            m = np.clip(maps[name][s], 0, None)
-            shown = (m / (1 + m)) ** (1 / 2.2)
-            ax = axes[i][j]
-            ax.imshow(np.clip(shown, 0, 1))
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if i == 0:
-                ax.set_title("irradiance" if s == 1 else f"s = {s:g}", fontsize=8)
-            if j == 0:
-                ax.set_ylabel(name, fontsize=9)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
 
 
 def plot_tracking(session, path: Path) -> None:
@@ -94,7 +66,9 @@ def plot_tracking(session, path: Path) -> None:
 def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, session, maps: dict) -> Path:
     report = out / "report"
     report.mkdir(exist_ok=True)
-    plot_maps(maps, report / "maps.png")
+    exponents = sorted(next(iter(maps.values())))
+    maps_grid({name: np.stack([m[s] for s in exponents]) for name, m in maps.items()}, exponents, report / "maps.png",
+              "Irradiance (s = 1) and reflection maps baked from the captured probe")
     plot_tracking(session, report / "tracking.png")
     c, s = metrics["capture"], metrics["session"]
     capture_rows = [[html.escape(k), html.escape(_num(v)) if not isinstance(v, list) else html.escape("; ".join(map(str, v)) or "none")]
@@ -127,7 +101,7 @@ lost in {lost} of them (no object drawn there). FLIP against the truth frame: {_
 <h2 id="scenario">Scenario</h2><pre>{html.escape(scenario_to_toml(scenario))}</pre>
 <h2 id="capture">Captured probe and the truth</h2>{_img(out / 'capture' / 'probe_vs_truth.png', 'probe vs truth', 1100)}
 {_img(out / 'capture' / 'coverage.png', 'coverage', 500)}
-<h2 id="maps">Maps per method</h2><p>Baked from the captured probe (maps/&lt;method&gt;/), shown by Reinhard's operator.</p>
+<h2 id="maps">Maps per method</h2><p>Baked from the captured probe (maps/&lt;method&gt;/), each shown by Reinhard's operator.</p>
 {_img(report / 'maps.png', 'maps', 1100)}
 <h2 id="frames">Frames</h2><div class="row">{figures}</div>
 <h2 id="errors">Errors</h2>
