@@ -242,7 +242,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         truth_maps = session_maps(truth, needed)
     log_average = r.log_average if args.log_average is None else args.log_average
     overlay = r.overlay if args.overlay is None else args.overlay
-    settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay)
+    settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay,
+                               flip_every=r.flip_every)
     with progress_bar(f"rendering the AR session ({', '.join(needed)} maps)", 1.0) as update:
         session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, objects, settings,
                               progress=lambda f: update(completed=f))

@@ -137,3 +137,14 @@ def test_spans_merged_to_fit_the_uniform_block_give_the_same_sums(gl, env, thres
     np.testing.assert_array_equal(merged.read(), whole.read())
     whole.release()
     merged.release()
+
+
+@pytest.mark.parametrize("name", ["accurate", "bounds"])
+def test_bake_by_name_takes_the_gl_path_when_given_a_context(gl, env, name):
+    from arsim.lighting.methods import bake
+
+    reference = bake(env, EXPONENTS, name)
+    on_gl = bake(env, EXPONENTS, name, gl=gl)
+    assert reference.computed_on == "numpy" and on_gl.computed_on.startswith("gl: ")
+    assert max_relative(on_gl.maps, reference.maps) < 1e-3
+    assert bake(env, EXPONENTS, "mipmap", gl=gl).computed_on == "numpy"  # no GL bake of its own

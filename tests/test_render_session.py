@@ -30,6 +30,8 @@ far_m = 0.6
 [[ar.look_away]]
 start_s = 2.0
 end_s = 3.5
+[render]
+flip_every = 1
 [[render.objects]]
 kind = "torus"
 [[render.objects]]

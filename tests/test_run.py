@@ -71,6 +71,12 @@ def test_run_writes_the_run_directory_manifest_and_report(runs):
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["seed"] == 7 and manifest["scenario"]["name"] == "small"
     assert set(manifest["seconds_per_stage"]) == {"recording", "capture", "maps", "session", "report"}
+    # The truth frame and its FLIP on every 4th frame (the default flip_every) and on the saved frames.
+    session = json.loads((out / "metrics.json").read_text())["session"]
+    saved = {int(p.stem) for p in (out / "frames").glob("*.png")}
+    measured = [(n, k) for n, (k, f) in enumerate(zip(session["frames_rendered"], session["flip_per_frame"])) if f is not None]
+    assert measured and session["flip_frames"] == len(measured)
+    assert all(n % 4 == 0 or k in saved for n, k in measured)
     roles = {f["path"]: f["role"] for f in manifest["files"]}
     assert roles["capture/env.exr"].startswith("the captured") and roles["session.mp4"].startswith("the AR session")
     session = manifest["metrics"]["session"]

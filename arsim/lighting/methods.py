@@ -97,19 +97,33 @@ class BakeResult:
     maps: np.ndarray  # (E, N, N, 3) float32
     seconds_shared: float  # work all maps share (SH coefficients)
     seconds_per_map: tuple[float, ...]  # one per exponent
+    computed_on: str = "numpy"  # or "gl: <renderer>"
 
     @property
     def seconds_total(self) -> float:
         return self.seconds_shared + sum(self.seconds_per_map)
 
 
+# Methods that have a GL bake (gl_bake.py), held to these NumPy oracles within 1e-3 relative by the tests.
+GL_METHODS = ("accurate", "bounds")
+
+
 def bake(env: np.ndarray, exponents: Sequence[float], name: str, params: MapParameters | None = None,
-         progress: Callable[[int], None] | None = None) -> BakeResult:
-    """All maps of one method, timed; progress(k) is called after map k is done."""
+         progress: Callable[[int], None] | None = None, gl=None) -> BakeResult:
+    """All maps of one method, timed; progress(k) is called after map k is done. With a moderngl context
+    `gl`, the GL_METHODS bake on the GL path (float32), all maps in one pass: its time is all shared."""
     params = params or MapParameters()
     params.check()
     check_inputs(env, exponents)
     m = method(name)
+    if gl is not None and name in GL_METHODS:
+        from arsim.lighting.gl_bake import gl_accurate_maps
+
+        start = time.perf_counter()
+        maps = gl_accurate_maps(env, exponents, ctx=gl, bounds_threshold=params.bounds_threshold if name == "bounds" else None)
+        if progress is not None:
+            progress(len(exponents))
+        return BakeResult(maps, time.perf_counter() - start, (0.0,) * len(exponents), f"gl: {gl.info['GL_RENDERER']}")
     start = time.perf_counter()
     shared = m.prepare(env, list(exponents), params)
     shared_s = time.perf_counter() - start

@@ -42,13 +42,14 @@ class SessionSettings:
     saved_frames: Sequence[int] = ()  # frame indices written as PNG (default: four spread over the path)
     every: int = 1  # render every k-th frame of the AR path (a quick look; the video holds those frames)
     overlay: bool = False  # step 7: frame time and map state drawn at the top left (left out of the FLIP)
+    flip_every: int = 1  # the truth frame and its FLIP on every k-th rendered frame (and on the saved ones)
 
 
 @dataclass
 class SessionResult:
     tracking: TrackingRun
     frames: np.ndarray  # (K,) indices of the AR path's frames rendered
-    flip: np.ndarray  # (K,) mean FLIP inside the mask; nan where no object was drawn
+    flip: np.ndarray  # (K,) mean FLIP inside the mask; nan where no object was drawn or not measured (flip_every)
     step_ms: dict[str, list[float]] = field(default_factory=dict)  # CPU ms per step per frame
     gl_ms: dict[str, list[float]] = field(default_factory=dict)  # GL ms per GL step per frame
     records: list = field(default_factory=list)  # the render loop's FrameRecord per frame (the profile's input)
@@ -57,6 +58,7 @@ class SessionResult:
         drawn = np.isfinite(self.flip)
         return self.tracking.metrics() | {
             "flip_mean": float(np.mean(self.flip[drawn])) if drawn.any() else float("nan"),
+            "flip_frames": int(drawn.sum()),
             "frames_rendered": [int(k) for k in self.frames],
             "flip_per_frame": [None if not np.isfinite(f) else float(f) for f in self.flip],
             "step_ms": {name: float(np.median(v)) for name, v in self.step_ms.items() if v},
@@ -146,7 +148,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
             out = captured.read_output()
             mask = captured.read_mask() > 0.5
             step_ms["readback"].append(1000 * (time.perf_counter() - start))
-            if pose.found:
+            if pose.found and (n % settings.flip_every == 0 or k in saved):
                 start = time.perf_counter()
                 true_light.render_objects(Rotation.from_matrix(pose.rotation), pose.translation)
                 true_light.background_pass(frame)

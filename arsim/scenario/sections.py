@@ -204,6 +204,9 @@ class RenderSection:
     white: float = setting(2.0, min=0.001, max=1e6, help="Reinhard's L_white")
     log_average: bool = setting(False, help="tone-map with Reinhard's log-average luminance instead of the mean (thesis)")
     overlay: bool = setting(False, help="draw the overlay (frame time, map state) at the frames' top left")
+    flip_every: int = setting(4, min=1, max=10000,
+                              help="the truth frame and its FLIP on every k-th frame (FLIP costs about 1 s of CPU "
+                                   "for a whole 640 x 480 frame; 1: every frame)")
     methods: tuple[str, ...] = setting((), choices=MAP_METHODS,
                                        help="arsim run: map methods baked and measured besides those the objects use")
     objects: tuple[RenderObjectSection, ...] = subsection(
