@@ -52,26 +52,11 @@ def run_command(scenario: Path, out: Path, baseline: Path | None, max_flip: floa
     return command
 
 
-# The thread pools of a run's libraries: llvmpipe's rasterisers, FLIP's OpenMP, OpenCV, BLAS, numba.
-THREAD_VARIABLES = ("LP_NUM_THREADS", "OMP_NUM_THREADS", "OPENCV_FOR_THREADS_NUM", "OPENBLAS_NUM_THREADS",
-                    "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
-
-
-def thread_limits(workers: int) -> dict[str, str]:
-    """Environment variables that share the machine's cores among `workers` runs: each run's libraries
-    would otherwise start a thread per core, and threads that outnumber the cores wait on each other at
-    every draw and barrier. A variable the user has set is left as it is."""
-    if workers <= 1:
-        return {}
-    per_run = str(max(1, (os.cpu_count() or 1) // workers))
-    return {name: per_run for name in THREAD_VARIABLES if name not in os.environ}
-
-
-def run_one(scenario: str, out: str, baseline: str | None, max_flip: float, threads: dict[str, str] | None = None) -> dict:
+def run_one(scenario: str, out: str, baseline: str | None, max_flip: float) -> dict:
     """One scenario's `arsim run` (also what a Ray task runs): its status, metrics and regression."""
     start = time.perf_counter()
     done = subprocess.run(run_command(Path(scenario), Path(out), Path(baseline) if baseline else None, max_flip),
-                          capture_output=True, text=True, env=os.environ | (threads or {}) | {"PYTHONUNBUFFERED": "1"})
+                          capture_output=True, text=True, env=os.environ | {"PYTHONUNBUFFERED": "1"})
     result = {"scenario": scenario, "out": out, "returncode": done.returncode, "wall_s": time.perf_counter() - start,
               "error": done.stderr.strip().splitlines()[-1] if done.returncode not in (0, 1) and done.stderr.strip() else None}
     manifest = Path(out) / "manifest.json"
@@ -101,8 +86,7 @@ def check_ray_address(address: str, timeout_s: float = 3.0) -> None:
 def _run_local(jobs: list[tuple], workers: int, done: Callable[[dict], None]) -> list[dict]:
     results = []
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        threads = thread_limits(workers)
-        for future in as_completed([pool.submit(run_one, *job, threads) for job in jobs]):
+        for future in as_completed([pool.submit(run_one, *job) for job in jobs]):
             results.append(future.result())
             done(results[-1])
     return results
