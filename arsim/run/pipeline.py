@@ -62,13 +62,12 @@ FILE_ROLES = {
 }
 
 
-def versions() -> dict:
+def versions(gl_renderer: str) -> dict:
     import cv2
     import moderngl
 
     return {"arsim": __version__, "python": platform.python_version(), "numpy": np.__version__,
-            "opencv": cv2.__version__, "moderngl": moderngl.__version__,
-            "gl_renderer": create_gl_context().info["GL_RENDERER"]}
+            "opencv": cv2.__version__, "moderngl": moderngl.__version__, "gl_renderer": gl_renderer}
 
 
 def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | None = None,
@@ -138,6 +137,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         params = MapParameters()
         # accurate and bounds on the GL path: NumPy's float64 sums take half a minute at 128².
         gl = create_gl_context()
+        gl_renderer = gl.info["GL_RENDERER"]  # (for the manifest: the context is released after the maps)
         reference = bake(truth, exponents, "accurate", params, gl=gl).maps
         for k, name in enumerate(methods):
             baked = bake(probe, exponents, name, params, gl=gl)
@@ -175,7 +175,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         "scenario": {"source": source, "name": scenario.run.name, "resolved": "scenario.toml"},
         "seed": scenario.run.seed,
         "recording": str(recording) if recording != out / "recording" else "recording",
-        "versions": versions(),
+        "versions": versions(gl_renderer),
         "seconds_per_stage": seconds,
         "metrics": metrics,
         "files": _files_under(out, FILE_ROLES),

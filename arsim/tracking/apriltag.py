@@ -21,6 +21,7 @@ import numpy as np
 
 from arsim.core.conventions import CameraIntrinsics
 from arsim.sensors.table import TAG_DICTIONARIES
+
 MIN_WHITE_BLACK_DIFF = 20  # 8-bit codes (linearised): see TagTracker
 # Columns: the marker's x, y (up the tag image) and z (its normal) in world axes.
 MARKER_TO_WORLD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
