@@ -61,6 +61,8 @@ class ProfileRun:
             "misses": misses, "within_budget_pct": 100.0 * (1 - misses / max(len(frame), 1)),
             "frame_ms": _stats(frame),
             "bake": {"completed": end is not None, "frames_to_finish": end, "seconds": seconds,
+                     "texels_done_pct": 100.0 * self.records[-1].bake_progress if self.records else 0.0,
+                     "work_done_pct": 100.0 * self.records[-1].bake_work_progress if self.records else 0.0,
                      "worst_frame_ms": float(baking.max()) if baking.size else None,
                      "within_budget_pct_while_baking": 100.0 * float((baking <= self.budget_ms).mean()) if baking.size else None,
                      "gl_ms_total": float(sum(r.gl_ms.get("bake", 0.0) for r in self.records))},
@@ -102,7 +104,9 @@ def markdown(runs: list[ProfileRun]) -> str:
             lines.append("- Bake: " + (f"complete after {b['frames_to_finish']} frames, {b['seconds']:.2f} s; worst frame while "
                                        f"baking {b['worst_frame_ms']:.3f} ms; {b['within_budget_pct_while_baking']:.2f} % of "
                                        f"those frames within budget; GL time {b['gl_ms_total']:.1f} ms"
-                                       if b["completed"] else "not complete"))
+                                       if b["completed"] else
+                                       f"not complete: {b['texels_done_pct']:.2f} % of the texels and {b['work_done_pct']:.2f} % "
+                                       f"of the work done; GL time {b['gl_ms_total']:.1f} ms"))
         lines += ["",
                   "| step | CPU p50 | CPU p95 | CPU p99 | CPU max | GL p50 | GL p95 | GL p99 | GL max | frames |",
                   "|---|---|---|---|---|---|---|---|---|---|"]

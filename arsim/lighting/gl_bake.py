@@ -27,6 +27,7 @@ from arsim.lighting.sh import sh_coefficients
 MAX_MAPS_PER_PASS = 8  # the colour attachments every GL 4.3 has
 MAX_SPANS = 2048  # spans of input texels a draw takes: 16 KiB, the uniform block every GL 4.3 allows
 PASS_INPUTS = 32768  # input texels a draw sums at most (with MAX_SPANS, loop iterations below 65 535)
+FOLD_TERMS = 64  # input texels the accurate shader sums plainly before adding them into its compensated sums
 COEFFICIENT_ROW = 1024  # texels per row of the SH coefficient texture
 
 
@@ -127,7 +128,8 @@ class GLAccurateBaker(GLBaker):
     splits_inputs = True
 
     def __init__(self, env: np.ndarray, exponents: Sequence[float], ctx=None, bounds_threshold: float | None = None):
-        super().__init__(env, exponents, ctx, [f"MAX_SPANS {MAX_SPANS}", *(["BOUNDS"] if bounds_threshold is not None else [])])
+        super().__init__(env, exponents, ctx, [f"MAX_SPANS {MAX_SPANS}", f"FOLD_TERMS {FOLD_TERMS}",
+                                               *(["BOUNDS"] if bounds_threshold is not None else [])])
         self.threshold = bounds_threshold
         # The widest cone around a tile's texels whose input texels add anything: the hemisphere, or the
         # smallest exponent's lobe down to the threshold.

@@ -18,16 +18,19 @@ from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, Tile, tiles
 from arsim.lighting.gl_bake import GLAccurateBaker, GLShBaker
 
 BAKE_METHODS = ("accurate", "bounds", "sh")
-AUTO_UNIT = 16  # the tile side `auto` schedules in (or the map's side), split where needed
+# The tile side `auto` schedules in (or the map's side). Accurate, 512² probe, eight maps, 500 frames of
+# 20 ms on llvmpipe: tiles of 32 baked the most work per frame (16: a draw's fixed costs weigh more; 64:
+# a wider tile's pass visits 12 % more input texels).
+AUTO_UNIT = 32
 AUTO_FIRST = 4  # auto's first piece, which measures the time per unit of work, is split down to this side
 # The smallest tile auto splits down to: llvmpipe runs fragment shaders on 4 x 4 blocks (and GPUs on 2 x 2
 # quads in warps of 32 or 64), so a smaller tile costs as much as a block: 1 x 1 tiles made a 128² bake
 # 16 times slower.
 BLOCK = 4
 AUTO_MIN = BLOCK
-# Auto sums an accurate (or bounds) tile's input texels in ranges over several frames, halved down to this
-# many.
-MIN_RANGE = 256
+# Auto sums an accurate (or bounds) tile's input texels in ranges over several frames, at least this many
+# a frame.
+MIN_RANGE = 16
 AUTO_SAFETY = 1.25  # predicted cost x this must fit: GL time per unit of work varies from tile to tile
 TILE_OVERHEAD_MS = 0.1  # the time a piece's draws cost whatever their size (measured on llvmpipe: 0.05-0.1)
 AUTO_STALL_FRAMES = 30  # after this many frames without room for a tile, bake one anyway (the bake must end)
@@ -82,7 +85,8 @@ class LoopBaker:
         self.idle_frames = 0
         self.gl_ms_total = 0.0
         self.last_gl_ms = 0.0  # the GL time of the last step's tiles
-        self.works: dict = {}
+        self.shaded: dict[Tile, int] = {}
+        self.work_total, self.work_done = sum(self._work(piece) for piece in self.queue), 0.0
 
     def warm_up(self) -> None:
         """Draw the bake passes over an empty tile: their shaders' machine code is compiled then."""
@@ -94,8 +98,14 @@ class LoopBaker:
 
     @property
     def progress(self) -> float:
-        """The share of the disk's texels baked."""
+        """The share of the disk's texels baked (the progress display's)."""
         return 1.0 if self.done else self.texels_done / self.texels_total
+
+    @property
+    def work_progress(self) -> float:
+        """The share of the bake's work done (texels times the input terms each sums): what the frames
+        still to come are proportional to, where texels differ in cost."""
+        return 1.0 if self.done else self.work_done / max(self.work_total, 1.0)
 
     def _texels(self, tile) -> int:
         return int(self.gl.inside[tile.row0:tile.row0 + tile.size, tile.col0:tile.col0 + tile.size].sum())
@@ -107,53 +117,67 @@ class LoopBaker:
         blocks = inside.reshape(inside.shape[0] // b, b, inside.shape[1] // b, b).any(axis=(1, 3))
         return int(blocks.sum()) * b * b
 
+    def _shaded_cached(self, tile) -> int:
+        if tile not in self.shaded:
+            self.shaded[tile] = self._shaded(tile)
+        return self.shaded[tile]
+
+    def _count(self, piece: Piece) -> int:
+        """The input terms a piece sums."""
+        return self.gl.inputs(piece.tile) - piece.first if piece.count is None else piece.count
+
     def _work(self, piece: Piece) -> float:
         """A piece's work in units the GL time is proportional to: the texels shaded times the input terms
         each sums."""
-        if piece not in self.works:
-            count = self.gl.inputs(piece.tile) if piece.count is None else piece.count
-            self.works[piece] = float(self._shaded(piece.tile)) * count
-        return self.works[piece]
+        return float(self._shaded_cached(piece.tile)) * self._count(piece)
 
-    def _split(self) -> bool:
-        """Split the head of the queue: (accurate and bounds) its input texels into halves down to
-        MIN_RANGE, summed over several frames; (SH) a whole tile into its four quadrants (row by row, the
-        thesis's order) down to AUTO_MIN; False when it cannot be split. Ranges keep the tile whole: a
-        wider tile costs less per texel (a draw's fixed costs and llvmpipe's 4 x 4 blocks)."""
-        piece = self.queue[0]
-        tile = piece.tile
-        if not self.gl.splits_inputs:
-            if tile.size <= AUTO_MIN:
-                return False
-            self.queue.popleft()
-            half = tile.size // 2
-            for dr, dc in reversed([(0, 0), (0, half), (half, 0), (half, half)]):
-                self.queue.appendleft(Piece(Tile(tile.row0 + dr, tile.col0 + dc, half)))
-            return True
-        count = self.gl.inputs(tile) - piece.first if piece.count is None else piece.count
-        if count <= MIN_RANGE:
+    def _split_quadrants(self) -> bool:
+        """(SH) Split the head of the queue, a whole tile, into its four quadrants (row by row, the
+        thesis's order) down to AUTO_MIN; False when it cannot be split."""
+        tile = self.queue[0].tile
+        if tile.size <= AUTO_MIN:
             return False
         self.queue.popleft()
-        half = count // 2
-        self.queue.appendleft(Piece(tile, piece.first + half, count - half, piece.last))
-        self.queue.appendleft(Piece(tile, piece.first, half, False))
+        half = tile.size // 2
+        for dr, dc in reversed([(0, 0), (0, half), (half, 0), (half, half)]):
+            self.queue.appendleft(Piece(Tile(tile.row0 + dr, tile.col0 + dc, half)))
         return True
 
+    def _take_inputs(self, count: int) -> Piece:
+        """(Accurate, bounds) The head tile's next `count` input terms as a piece; the rest stays queued."""
+        head = self.queue.popleft()
+        rest = self._count(head) - count
+        if rest <= 0:
+            return head
+        self.queue.appendleft(Piece(head.tile, head.first + count, None if head.count is None else rest, head.last))
+        return Piece(head.tile, head.first, count, False)
+
     def _auto_batch(self, available_ms: float) -> list:
-        """The pieces predicted to fit: from the head of the queue, splitting the head while even it
-        alone would not fit, so that the work per frame follows the time left however costly a texel is."""
-        batch, spent = [], 0.0
+        """The pieces predicted to fit in available_ms. Accurate and bounds: the head tile's input terms
+        are cut where the time left ends, so that a frame makes one draw of about the time it has (a
+        draw's fixed costs paid once, no time lost to a coarse cut). SH: whole tiles, the head split into
+        quadrants while even it alone would not fit."""
         if not self.cost_per_work:  # nothing measured yet: a small piece, to measure
-            while self.queue[0].tile.size > AUTO_FIRST and self._split():
+            if self.gl.splits_inputs:
+                return [self._take_inputs(MIN_RANGE)]
+            while self.queue[0].tile.size > AUTO_FIRST and self._split_quadrants():
                 pass
             return [self.queue.popleft()]
         cost = max(self.cost_per_work) * AUTO_SAFETY
+        batch, left = [], available_ms
         while self.queue:
-            predicted = self._work(self.queue[0]) * cost + TILE_OVERHEAD_MS
-            if spent + predicted <= available_ms:
+            head = self.queue[0]
+            predicted = self._work(head) * cost + TILE_OVERHEAD_MS
+            if predicted <= left:
                 batch.append(self.queue.popleft())
-                spent += predicted
-            elif batch or not self._split():
+                left -= predicted
+                continue
+            if self.gl.splits_inputs:
+                count = int((left - TILE_OVERHEAD_MS) / (self._shaded_cached(head.tile) * cost))
+                if count >= MIN_RANGE:
+                    batch.append(self._take_inputs(count))
+                break
+            if batch or not self._split_quadrants():
                 break
         return batch
 
@@ -169,7 +193,8 @@ class LoopBaker:
                 self.idle_frames += 1
                 if self.idle_frames < AUTO_STALL_FRAMES:
                     return 0
-                batch = [self.queue.popleft()]  # (the smallest piece by now: the bake must end)
+                # (the bake must end)
+                batch = [self._take_inputs(MIN_RANGE) if self.gl.splits_inputs else self.queue.popleft()]
             self.idle_frames = 0
         else:
             batch = [self.queue.popleft()]
@@ -188,6 +213,7 @@ class LoopBaker:
         if work > 0:
             self.cost_per_work.append(max(waited - TILE_OVERHEAD_MS * len(batch), 0.0) / work)
         self.texels_done += sum(self._texels(piece.tile) for piece in batch if piece.last)
+        self.work_done += work
         return len(batch)
 
     def maps(self) -> np.ndarray:
