@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from arsim import __version__
+from arsim.core.assets import assets_dir
 from arsim.core.errors import ArsimError
 from arsim.core.files import write_text_atomic
 from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
@@ -443,6 +444,33 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------------------------
+# arsim bases
+
+
+def cmd_bases_compare(args: argparse.Namespace) -> int:
+    from arsim.evaluate.compare_bases import (compare_bases, parse_entries, plane_lighting, visual_comparison,
+                                              visual_figures, write_bases_comparison)
+
+    selected = parse_entries(args.bases) if args.bases else None  # bad names fail here, before any work
+    if not 0.0 <= args.sun_elevation <= 90.0:
+        raise ArsimError(f"--sun-elevation {args.sun_elevation:g} is not an elevation: give 0 to 90 degrees")
+    env_path = args.env or assets_dir() / "envmaps" / "interior.exr"
+    env, _ = replace_nonfinite(read_hdr(env_path), "refuse", str(env_path))
+    env = to_layout(env, "equirect", 32)  # (irradiance is smooth: 32 x 64 radiance samples hold it)
+    out = _output_dir(args.output)
+    with progress_bar("comparing bases", args.signals) as update:
+        comparison = compare_bases(args.signals, args.seed, selected, progress=lambda k: update(completed=k))
+    paths = write_bases_comparison(comparison, out)
+    visual = visual_comparison(plane_lighting(env, args.sun_elevation, 30.0, args.sun_share), selected=selected)
+    paths += [out / "visual.png", out / "visual_errors.png"]
+    visual_figures(visual, paths[-2], paths[-1], f"{Path(env_path).name}, sun at {args.sun_elevation:g} degrees elevation")
+    for key, stats in comparison.summary().items():
+        print(f"{key:<14} mean error {100 * stats['mean']:8.3f} %   visual {100 * visual.errors()[key]:7.3f} %")
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
 # arsim validate
 
 
@@ -574,6 +602,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=list(METHODS), default="fast",
                    help="; ".join(f"{m.name}: {m.summary}" for m in METHODS.values()) + " (default fast)")
     p.set_defaults(run=cmd_bake)
+
+    p = _command(sub, "bases", "irradiance normal mapping's bases (SH, Half-Life 2, H-basis, modified H-basis, HSH, Makhotkin, "
+                 "Zernike): `compare` measures how well each holds directional irradiance",
+                 "arsim bases compare -o bases --signals 200")
+    bases_sub = p.add_subparsers(dest="bases_command", metavar="ACTION", parser_class=_Parser, required=True)
+    q = _command(bases_sub, "compare", "the integrated squared error of each basis and coefficient count over random "
+                 "irradiance signals (bases.md, bases.json, bases.png) and a normal-mapped plane under one environment "
+                 "with a grazing sun, a tile per basis (visual.png, visual_errors.png)",
+                 "arsim bases compare -o bases --signals 200   (or: --bases h6,modh6,sh9,hsh9 --env assets/envmaps/sunrise.exr)")
+    q.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    q.add_argument("--signals", type=_positive("--signals"), default=100, metavar="N",
+                   help="random irradiance signals to average over (default 100)")
+    q.add_argument("--seed", type=int, default=0, help="the first signal's seed (default 0)")
+    q.add_argument("--bases", type=lambda t: [b.strip() for b in t.split(",") if b.strip()], metavar="B,B,...",
+                   help="bases with their counts, e.g. sh9,hl2,h4,h6,modh6,hsh9,makhotkin9,zernike6,sh-rh9 (default: all)")
+    q.add_argument("--env", type=Path, metavar="ENV.exr", help="the visual comparison's environment (default: assets' interior.exr)")
+    q.add_argument("--sun-elevation", type=float, default=8.0, metavar="DEG",
+                   help="the visual comparison's sun elevation in degrees (default 8: grazing)")
+    q.add_argument("--sun-share", type=_positive("--sun-share", float), default=3.0, metavar="X",
+                   help="the sun's irradiance at normal incidence, in units of the sky's on the plane (default 3)")
+    q.set_defaults(run=cmd_bases_compare)
 
     p = _command(sub, "compare-methods", "measure every map method against accurate: tables, a figure grid, SH error by order",
                  "arsim compare-methods assets/envmaps/courtyard.exr -o compare --size 128")
