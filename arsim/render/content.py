@@ -42,14 +42,49 @@ def torus_distance(p: np.ndarray, major: float, minor: float) -> np.ndarray:
     return np.linalg.norm(q, axis=-1) - minor
 
 
+def scene_distance(p: np.ndarray, major: float, minor: float) -> np.ndarray:
+    """Distance to the nearest of the torus and the table top (y = 0)."""
+    return np.minimum(torus_distance(p, major, minor), p[..., 1])
+
+
+def sphere_trace(origins: np.ndarray, directions: np.ndarray, distance, scale: float, reach: float,
+                 steps: int = 96) -> np.ndarray:
+    """Whether each ray (origins and directions broadcast together, (..., 3)) hits the surface of the
+    distance function `distance` within `reach`: sphere tracing, each step the distance to the nearest
+    surface; scale is the scene's small length (the hit and the step floors are fractions of it)."""
+    travelled = np.full(np.broadcast_shapes(origins.shape, directions.shape)[:-1], 1e-3 * scale)
+    hit = np.zeros(travelled.shape, dtype=bool)
+    for _ in range(steps):
+        p = origins + directions * travelled[..., None]
+        d = distance(p)
+        hit |= d < 1e-4 * scale
+        travelled = np.where(hit, travelled, travelled + np.maximum(d, 1e-5 * scale))
+        if ((travelled > reach) | hit).all():
+            break
+    return hit
+
+
+def torus_texels(major: float, minor: float, size: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    """Points, normals and tangents (H, W, 3) of the torus at the centres of an H x W texture's texels,
+    row 0 at v = 1 (the light map's and the normal map's parameterisation)."""
+    h, w = size
+    v, u = np.meshgrid((h - 1 - np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    return torus_surface(u, v, major, minor)
+
+
+def tangent_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Any right-handed (t, b) completing unit normals (..., 3) to a frame."""
+    helper = np.where(np.abs(normal[..., 1:2]) < 0.9, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    t_axis = normalize(np.cross(helper, normal))
+    return t_axis, np.cross(normal, t_axis)
+
+
 def bake_torus_occlusion(major: float = 0.05, minor: float = 0.02, size: tuple[int, int] = (64, 128),
                          rays: int = 96, seed: int = 0) -> np.ndarray:
     """Ambient-occlusion light map (H, W, 3) of the torus on the table, row 0 at v = 1: per texel, the
     fraction of cosine-weighted rays from the surface that escape the torus and the table top (sphere
     tracing of the exact distance functions). 1 on the top of the ring, near 0 where it touches the table."""
-    h, w = size
-    v, u = np.meshgrid((h - 1 - np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
-    point, normal, _ = torus_surface(u, v, major, minor)
+    point, normal, _ = torus_texels(major, minor, size)
     rng = np.random.default_rng(seed)
     # Cosine-weighted directions around each normal (stratified: a side x side grid of the two random numbers).
     side = int(np.sqrt(rays))
@@ -57,22 +92,11 @@ def bake_torus_occlusion(major: float = 0.05, minor: float = 0.02, size: tuple[i
           + rng.random((side * side, 2))) / side
     radius, angle = np.sqrt(xi[:, 0]), 2.0 * np.pi * xi[:, 1]
     local = np.stack([radius * np.cos(angle), radius * np.sin(angle), np.sqrt(1.0 - xi[:, 0])], -1)
-    helper = np.where(np.abs(normal[..., 1:2]) < 0.9, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
-    t_axis = normalize(np.cross(helper, normal))
-    b_axis = np.cross(normal, t_axis)
+    t_axis, b_axis = tangent_frames(normal)
     directions = (local[:, 0, None, None, None] * t_axis + local[:, 1, None, None, None] * b_axis
                   + local[:, 2, None, None, None] * normal)  # (R, H, W, 3)
     origin = point + normal * (1e-3 * minor)
-    travelled = np.full(directions.shape[:-1], 1e-3 * minor)
-    hit = np.zeros(directions.shape[:-1], dtype=bool)
-    reach = 6.0 * (major + minor)
-    for _ in range(96):  # sphere tracing: each step the distance to the nearest surface
-        p = origin + directions * travelled[..., None]
-        distance = np.minimum(torus_distance(p, major, minor), p[..., 1])
-        hit |= distance < 1e-4 * minor
-        travelled = np.where(hit, travelled, travelled + np.maximum(distance, 1e-5 * minor))
-        if ((travelled > reach) | hit).all():
-            break
+    hit = sphere_trace(origin, directions, lambda p: scene_distance(p, major, minor), minor, 6.0 * (major + minor))
     occlusion = (~hit).mean(axis=0)
     return np.repeat(occlusion[..., None], 3, axis=-1).astype(np.float32)
 
