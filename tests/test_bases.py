@@ -125,3 +125,41 @@ def test_bases_compare_end_to_end(tmp_path):
 ])
 def test_bases_compare_refuses_bad_input_in_one_line(tmp_path, args, fragment):
     assert_one_line_error(arsim("bases", "compare", "-o", tmp_path, *args), fragment)
+
+
+def test_the_glsl_bases_equal_the_numpy_ones():
+    """bases.glsl (what the renderer evaluates) against functions.py, float32 against float64."""
+    from importlib import resources
+
+    from arsim.core.gl import create_gl_context
+
+    ctx = create_gl_context()
+    source = resources.files("arsim.lighting").joinpath("shaders", "bases.glsl").read_text()
+    d = np.random.default_rng(0).normal(size=(1024, 3))
+    d[:, 2] = np.abs(d[:, 2])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[:4] = [[0, 0, 1], [1, 0, 0], [0, -1, 0], [0.6, 0, 0.8]]  # the pole and the horizon included
+    directions = ctx.buffer(np.hstack([d, np.zeros((len(d), 1))]).astype("f4").tobytes())
+    for name, basis in BASES.items():
+        count = max(basis.counts)
+        program = ctx.compute_shader(f"""#version 430
+#define BASIS_{name.upper()}
+#define BASIS_COUNT {count}
+layout(local_size_x = 64) in;
+layout(std430, binding = 0) readonly buffer In {{ vec4 dirs[]; }};
+layout(std430, binding = 1) writeonly buffer Out {{ float values[]; }};
+{source}
+void main() {{
+    uint i = gl_GlobalInvocationID.x;
+    float b[BASIS_COUNT];
+    basis_values(dirs[i].xyz, b);
+    for (int k = 0; k < BASIS_COUNT; k++) values[i * BASIS_COUNT + k] = b[k];
+}}""")
+        out = ctx.buffer(reserve=len(d) * count * 4)
+        directions.bind_to_storage_buffer(0)
+        out.bind_to_storage_buffer(1)
+        program.run(len(d) // 64)
+        values = np.frombuffer(out.read(), np.float32).reshape(len(d), count)
+        np.testing.assert_allclose(values, basis.evaluate(d, count), atol=1e-5, err_msg=name)
+        out.release()
+        program.release()
