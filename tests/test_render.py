@@ -232,3 +232,37 @@ def test_each_material_takes_its_own_methods_maps(gl, maps):
     r = Renderer(CAMERA, {"fast": maps, "mipmap": {1.0: dim[1.0]}}, gl)
     with pytest.raises(ArsimError, match="no mipmap maps for exponent 80"):
         r.add(SceneObject(uv_sphere(0.1), Material(KD, KS, 80.0, method="mipmap"), model))
+
+
+@pytest.mark.parametrize("spec, terms", [("modh6", None), ("modh6", 1), ("sh9", 4), ("hsh9", None), ("zernike6", None)])
+def test_irradiance_normal_mapping_equals_the_numpy_reference(gl, maps, spec, terms):
+    """A directional light map in each basis on a normal-mapped sphere (diffuse only): GL against
+    shading.inm_diffuse at the tangent-space normal and light-map coordinates GL interpolated (debug
+    targets), the coefficients looked up as GL does (bilinear, repeating, level 0 at this distance)."""
+    from arsim.evaluate.inm_compare import sample_periodic
+    from arsim.lighting.bases import parse_basis
+
+    count = parse_basis(spec)[1]
+    rng = np.random.default_rng(4)
+    coefficients = rng.uniform(-0.5, 0.5, (16, 32, count, 3))
+    coefficients[:, :, 0] = rng.uniform(2.0, 3.0, (16, 32, 3))  # a positive constant term dominates
+    material = Material(KD, (0.0, 0.0, 0.0), 80.0, normal_map=bumps(), directional_map=coefficients, basis=spec,
+                        inm_terms=terms)
+    r = render(gl, maps, material, debug=True)
+    hdr, mask = r.read_hdr(), r.read_mask() > 0.5
+    normal, incident = (v.astype(np.float64) for v in r.read_debug())
+    assert 0.03 < mask.mean() < 0.5
+    uv2 = np.stack([normal[mask][:, 3], incident[mask][:, 3]], axis=-1)
+    at_texels = sample_periodic(coefficients, uv2)
+    reference = np.array(KD) * shading.inm_diffuse(at_texels, spec, normal[mask][:, :3], terms)
+    rel = np.abs(hdr[mask] - reference) / np.abs(reference)
+    assert rel.max() < 1e-3, rel.max()  # (RGBA16F, as test_gl_shading_equals_the_numpy_reference)
+
+
+def test_a_directional_light_map_of_the_wrong_shape_is_refused(gl, maps):
+    from arsim.core.errors import ArsimError
+
+    with pytest.raises(ArsimError, match="modh6 directional light map holds"):
+        render(gl, maps, Material(KD, KS, 80.0, directional_map=np.zeros((8, 8, 4, 3)), basis="modh6"))
+    with pytest.raises(ArsimError, match="unknown basis"):
+        render(gl, maps, Material(KD, KS, 80.0, directional_map=np.zeros((8, 8, 4, 3)), basis="nope4"))

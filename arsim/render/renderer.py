@@ -25,6 +25,7 @@ from arsim.core.conventions import CameraIntrinsics, gl_projection_from_intrinsi
 from arsim.core.errors import ArsimError
 from arsim.core.gl import core_shader, create_gl_context
 from arsim.core.resample import extend_beyond_rim
+from arsim.lighting.bases import parse_basis
 from arsim.render.meshes import Mesh
 from arsim.render.shading import TONEMAP_LUMA
 
@@ -33,9 +34,16 @@ def _shader(name: str) -> str:
     return resources.files("arsim.render").joinpath("shaders", name).read_text(encoding="utf-8")
 
 
+def _bases_glsl() -> str:
+    return resources.files("arsim.lighting").joinpath("shaders", "bases.glsl").read_text(encoding="utf-8")
+
+
 def _source(name: str, defines: list[str]) -> str:
     header = "#version 430\n" + "".join(f"#define {d}\n" for d in defines)
-    return header + (core_shader("anglemap.glsl") if name.endswith(".frag") else "") + _shader(name)
+    shared = core_shader("anglemap.glsl") if name.endswith(".frag") else ""
+    if name.endswith(".frag") and "INM" in defines:
+        shared += _bases_glsl()
+    return header + shared + _shader(name)
 
 
 @dataclass
@@ -50,6 +58,13 @@ class Material:
     light_map: np.ndarray | None = None
     normal_map: np.ndarray | None = None
     method: str = ""  # whose maps light it ("": the renderer's default method)
+    # Irradiance normal mapping: a directional light map (H, W, count, 3), per texel of the second UV set
+    # the coefficients of the irradiance in `basis` (e.g. "modh6"), evaluated with the normal map's
+    # tangent-space normal; it replaces the irradiance map (and the AO light map) in the diffuse part.
+    # inm_terms: the spec's level of detail (listing 2.2), the leading terms summed (None: all).
+    directional_map: np.ndarray | None = None
+    basis: str = ""
+    inm_terms: int | None = None
 
 
 @dataclass
@@ -183,6 +198,14 @@ class Renderer:
         texture.build_mipmaps()
         return texture
 
+    def _coefficient_texture(self, coefficients: np.ndarray):
+        """A float RGB texture array, a layer per basis coefficient, of an (H, W, count, 3) light map whose
+        row 0 is its top."""
+        layers = np.ascontiguousarray(np.moveaxis(np.asarray(coefficients, dtype=np.float32)[::-1], 2, 0))
+        texture = self.ctx.texture_array((layers.shape[2], layers.shape[1], layers.shape[0]), 3, layers.tobytes(), dtype="f4")
+        texture.build_mipmaps()
+        return texture
+
     def add(self, obj: SceneObject) -> None:
         m = obj.material
         method = m.method or self.default_method
@@ -193,11 +216,21 @@ class Renderer:
             raise ArsimError(f"no {method or 'default'} maps for exponent {', '.join(f'{s:g}' for s in missing)} "
                              f"(the maps held: {held}); compute or load that method's maps for every exponent the objects use")
         defines = (["LIGHT_MAP"] if m.light_map is not None else []) + (["NORMAL_MAP"] if m.normal_map is not None else [])
+        terms = 0
+        if m.directional_map is not None:
+            basis, count = parse_basis(m.basis)
+            if m.directional_map.ndim != 4 or m.directional_map.shape[2:] != (count, 3):
+                raise ArsimError(f"a {m.basis} directional light map holds (H, W, {count}, 3) coefficients, "
+                                 f"not {m.directional_map.shape}; bake it for that basis")
+            terms = count if m.inm_terms is None else m.inm_terms
+            if not 1 <= terms <= count:
+                raise ArsimError(f"inm_terms {terms}: the {m.basis} light map has 1 to {count} terms")
+            defines += ["INM", f"BASIS_{basis.name.upper()}", f"BASIS_COUNT {count}"]
         defines += ["DEBUG"] if self.debug else []
         defines += ["FLOAT_FILTERING"] if "llvmpipe" in self.ctx.info["GL_RENDERER"] else []
         scale = np.abs(np.linalg.eigvalsh(obj.model[:3, :3].T @ obj.model[:3, :3])).max() ** 0.5
         sphere = None
-        if obj.sphere is not None and m.light_map is None and m.normal_map is None:
+        if obj.sphere is not None and m.light_map is None and m.normal_map is None and m.directional_map is None:
             defines.append("SPHERE_IMPOSTOR")
             program = self.ctx.program(vertex_shader=_source("sphere.vert", defines), fragment_shader=_source("object.frag", defines))
             quad = np.array([(-1, -1), (1, -1), (-1, 1), (-1, 1), (1, -1), (1, 1)], dtype="f4")  # counter-clockwise
@@ -216,15 +249,19 @@ class Renderer:
             program["normal_matrix"].write(np.linalg.inv(obj.model[:3, :3]).astype("f4").tobytes())  # (inverse transpose, column-major)
         errors = np.array([0.0] + [error * scale for _, error in obj.lods])[:len(vaos)]
         textures = {"light_map": self._image_texture(m.light_map) if m.light_map is not None else None,
-                    "normal_map": self._image_texture(m.normal_map) if m.normal_map is not None else None}
+                    "normal_map": self._image_texture(m.normal_map) if m.normal_map is not None else None,
+                    "coefficient_map": self._coefficient_texture(m.directional_map) if m.directional_map is not None else None}
+        if terms:
+            program["inm_terms"].value = terms
         # What does not change from frame to frame, set once: each object has its own program.
         program["kd"].value, program["ks"].value = tuple(m.kd), tuple(m.ks)
         units = [self.maps[method, 1.0], self.maps[method, float(m.exponent)]] + [t for t in textures.values() if t is not None]
         names = ["irradiance_map", "reflection_map"] + [n for n, t in textures.items() if t is not None]
         for unit, name in enumerate(names):
-            program[name].value = unit
+            if name in program:  # (a directional light map replaces the irradiance map: the compiler drops it)
+                program[name].value = unit
         texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
-                                                  max(tex.size)) for name, tex in textures.items() if tex is not None}
+                                                  max(tex.size[:2])) for name, tex in textures.items() if tex is not None}
         low, high = obj.mesh.positions.min(axis=0), obj.mesh.positions.max(axis=0)
         corners = np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
         self.objects.append(_Drawable(program, vaos, errors, units, corners @ obj.model.T, texel_world, sphere))

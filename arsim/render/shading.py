@@ -45,6 +45,17 @@ def shade(normal: np.ndarray, incident: np.ndarray, irradiance: np.ndarray, refl
     return np.asarray(kd) * diffuse + np.asarray(ks) * specular
 
 
+def inm_diffuse(coefficients: np.ndarray, basis: str, normal_tangent: np.ndarray, terms: int | None = None) -> np.ndarray:
+    """Irradiance normal mapping's diffuse term, E / pi (what an irradiance map holds): the basis (e.g.
+    "modh6") at the tangent-space normals (..., 3) weighted by the light map's coefficients there
+    (..., count, 3), the first `terms` of them (the spec's level of detail; None: all)."""
+    from arsim.lighting.bases import parse_basis
+
+    b, count = parse_basis(basis)
+    values = b.evaluate(normalize(normal_tangent), count)[..., :terms]
+    return np.einsum("...k,...kc->...c", values, np.asarray(coefficients)[..., :terms, :]) / np.pi
+
+
 def average_luminance(hdr: np.ndarray, mask: np.ndarray, log_average: bool = False) -> float:
     """The scene's average luminance over the masked pixels: their mean, what the top of the mip chain
     gives (thesis 5.3.4), or Reinhard's log-average exp(mean(log(delta + L_w)))."""

@@ -19,6 +19,11 @@ uniform float light_map_lod;        // its mip level for this object this frame 
 uniform sampler2D normal_map;
 uniform float normal_map_lod;
 #endif
+#ifdef INM
+uniform sampler2DArray coefficient_map;  // a layer per basis coefficient of the irradiance (second UV set)
+uniform float coefficient_map_lod;
+uniform int inm_terms;              // the spec's level of detail: the leading terms summed
+#endif
 #ifdef SPHERE_IMPOSTOR
 uniform vec3 center;                // world
 uniform float radius;
@@ -80,8 +85,10 @@ void main() {
 #else
     vec3 n = normalize(v_normal);
 #endif
+    vec3 n_ts = vec3(0.0, 0.0, 1.0);  // the normal in tangent space
 #ifdef NORMAL_MAP
     vec3 n_t = textureLod(normal_map, v_uv, normal_map_lod).xyz * 2.0 - 1.0;   // eq. 5.2
+    n_ts = normalize(n_t);
     vec3 t = normalize(v_tangent);
     vec3 b = cross(n, t);
     n = normalize(mat3(t, b, n) * n_t);
@@ -93,13 +100,30 @@ void main() {
 #ifdef LIGHT_MAP
     light = textureLod(light_map, v_uv2, light_map_lod).rgb;
 #endif
+#ifdef INM
+    // Irradiance normal mapping: the basis at the tangent-space normal, weighted by the texel's
+    // coefficients of the irradiance E; E / pi is what an irradiance map holds.
+    float basis[BASIS_COUNT];
+    basis_values(n_ts, basis);
+    vec3 irradiance = vec3(0.0);
+    for (int k = 0; k < inm_terms; k++) {
+        irradiance += basis[k] * textureLod(coefficient_map, vec3(v_uv2, float(k)), coefficient_map_lod).rgb;
+    }
+    vec3 diffuse = irradiance / BASES_PI;
+#else
     // Alg. 5.4 line 9 uses the unperturbed n_w here, a typo for n (see render/shading.py).
     vec3 diffuse = lookup(irradiance_map, n) * light;
+#endif
     vec3 specular = lookup(reflection_map, reflect(v, n));
     hdr = vec4(kd * diffuse + ks * specular, 1.0);
     mask = vec4(1.0, log(LOG_DELTA + dot(hdr.rgb, vec3(0.299, 0.587, 0.114))), 0.0, 0.0);
 #ifdef DEBUG
+#ifdef INM
+    debug_normal = vec4(n_ts, v_uv2.x);  // what the NumPy reference evaluates the light map with
+    debug_incident = vec4(v, v_uv2.y);
+#else
     debug_normal = vec4(n, light.r);
     debug_incident = vec4(v, 0.0);
+#endif
 #endif
 }
