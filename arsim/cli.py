@@ -208,7 +208,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     import dataclasses
 
     from arsim.lighting.bake_output import read_bake
-    from arsim.render.content import scene_objects
+    from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, check_maps, maps_needed, run_session, session_maps
     from arsim.scenario.environment import load_environment
 
@@ -246,8 +246,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay,
                                flip_every=r.flip_every)
     with progress_bar(f"rendering the AR session ({', '.join(needed)} maps)", 1.0) as update:
-        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, objects, settings,
-                              progress=lambda f: update(completed=f))
+        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), settings,
+                              truth_objects=light_objects(objects, truth), progress=lambda f: update(completed=f))
     source = str(args.env) if args.env is not None else ", ".join(map(str, args.maps)) if args.maps else "captured"
     metrics = session.metrics() | {"method": method, "methods": needed, "map_size": map_size, "log_average": log_average,
                                    "probe": source}
@@ -448,8 +448,14 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
 
 
 def cmd_bases_compare(args: argparse.Namespace) -> int:
-    from arsim.evaluate.compare_bases import (compare_bases, parse_entries, plane_lighting, visual_comparison,
-                                              visual_figures, write_bases_comparison)
+    from arsim.evaluate.compare_bases import (
+        compare_bases,
+        parse_entries,
+        plane_lighting,
+        visual_comparison,
+        visual_figures,
+        write_bases_comparison,
+    )
 
     selected = parse_entries(args.bases) if args.bases else None  # bad names fail here, before any work
     if not 0.0 <= args.sun_elevation <= 90.0:

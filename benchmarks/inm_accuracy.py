@@ -10,8 +10,6 @@ import argparse
 import time
 from pathlib import Path
 
-import numpy as np
-
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.evaluate.compare_bases import parse_entries

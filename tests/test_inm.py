@@ -11,8 +11,16 @@ from arsim.evaluate.inm_compare import compare_on_torus, scores
 from arsim.lighting.bases import get_basis, project, reconstruct
 from arsim.lighting.bases.functions import sh9
 from arsim.lighting.bases.irradiance import irradiance, sh9_irradiance_coefficients
-from arsim.lighting.bases.lightmap import (Surface, bake_directional, bake_irradiance_volume, decode_8bit,
-                                           encode_8bit, probe_samples, sample_volume, volume_irradiance)
+from arsim.lighting.bases.lightmap import (
+    Surface,
+    bake_directional,
+    bake_irradiance_volume,
+    decode_8bit,
+    encode_8bit,
+    probe_samples,
+    sample_volume,
+    volume_irradiance,
+)
 from arsim.lighting.bases.quadrature import hemisphere_quadrature
 from tests.conftest import ENVMAPS
 
@@ -102,3 +110,53 @@ def test_a_modified_h_light_map_is_closer_to_the_per_pixel_reference_than_the_ao
                                      lightmap_size=(16, 32), light_size=24))
     assert result["modh6"]["flip"] < result["thesis"]["flip"]
     assert result["modh6"]["mse"] < result["thesis"]["mse"]
+
+
+def _objects(tmp_path, extra: str = ""):
+    from arsim.render.content import scene_objects
+    from arsim.scenario import load_scenario
+
+    path = tmp_path / "inm.toml"
+    path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "inm-modh6"\nlightmap_size = 8\n'
+                    '[[render.objects]]\nkind = "disc"\nsize_m = 0.12\nlighting = "inm-h4"\nlightmap_size = 12\n' + extra)
+    return scene_objects(load_scenario(path).render)
+
+
+def test_scenario_objects_get_directional_light_maps_baked_from_the_light(tmp_path):
+    from arsim.render.content import light_objects
+
+    objects = _objects(tmp_path)
+    assert [o.material.basis for o in objects] == ["modh6", "h4"]
+    assert all(o.material.directional_map is None for o in objects)
+    light = to_layout(read_hdr(ENVMAPS[1]), "anglemap", 32)
+    torus, disc = light_objects(objects, light)
+    assert torus.material.directional_map.shape == (8, 16, 6, 3) and disc.material.directional_map.shape == (12, 12, 4, 3)
+    # contact shadow: on the disc, the constant term where the torus's tube touches it (0.05 m from the
+    # centre) is far darker than near the disc's rim
+    constant = disc.material.directional_map[..., 0, :].mean(axis=-1)
+    centres = ((np.arange(12) + 0.5) / 12 * 2 - 1) * 0.12
+    radius = np.hypot(*np.meshgrid(centres, centres, indexing="ij"))
+    under_tube = constant[(radius > 0.04) & (radius < 0.06)].mean()
+    outside = constant[(radius > 0.09) & (radius < 0.12)].mean()
+    assert under_tube < 0.3 * outside, (under_tube, outside)
+
+
+@pytest.mark.parametrize("lighting, fragment", [
+    ("inm-nosuch4", "unknown basis 'nosuch'"),
+    ("inm-h5", "has 4 or 6 coefficients, not 5"),
+    ("shiny", "use ibl, lightmap-ao or inm-BASIS"),
+])
+def test_a_bad_lighting_is_refused_in_one_line(tmp_path, lighting, fragment):
+    from tests.test_cli import arsim, assert_one_line_error
+
+    path = tmp_path / "bad.toml"
+    path.write_text(f'[[render.objects]]\nkind = "torus"\nlighting = "{lighting}"\n')
+    assert_one_line_error(arsim("render", path, "-o", tmp_path / "out"), fragment)
+
+
+def test_a_light_map_size_of_zero_is_refused_in_one_line(tmp_path):
+    from tests.test_cli import arsim, assert_one_line_error
+
+    path = tmp_path / "bad.toml"
+    path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "inm-modh6"\nlightmap_size = 0\n')
+    assert_one_line_error(arsim("validate", path), "lightmap_size")

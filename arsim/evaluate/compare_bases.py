@@ -25,12 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from arsim.core.files import atomic_path, write_text_atomic
 from arsim.core.errors import ArsimError
+from arsim.core.files import atomic_path, write_text_atomic
 from arsim.lighting.bases.functions import BASES, parse_basis, sh9
 from arsim.lighting.bases.irradiance import irradiance, sh9_irradiance_coefficients
 from arsim.lighting.bases.projection import project, reconstruct
-from arsim.lighting.bases.quadrature import hemisphere_quadrature, sphere_quadrature
+from arsim.lighting.bases.quadrature import hemisphere_quadrature
 
 COUNTS = (3, 4, 6, 9)
 SH_RH = "sh-rh"

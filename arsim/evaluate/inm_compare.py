@@ -16,13 +16,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from arsim.core.conventions import normalize
-from arsim.core.resample import sample_anglemap
+from arsim.core.resample import sample_anglemap, to_layout
 from arsim.lighting.accurate import accurate_maps
 from arsim.lighting.bases.functions import Basis
-from arsim.core.resample import to_layout
 from arsim.lighting.bases.lightmap import Surface, bake_directional, decode_8bit, encode_8bit, probe_samples
-from arsim.render.content import (bake_torus_occlusion, ridges_normal_map, scene_distance, sphere_trace,
-                                  torus_distance, torus_surface, torus_texels)
+from arsim.render.content import (
+    bake_torus_occlusion,
+    ridges_normal_map,
+    scene_distance,
+    sphere_trace,
+    torus_distance,
+    torus_surface,
+    torus_texels,
+)
 from arsim.render.shading import perturbed_normal
 
 MAJOR, MINOR = 0.05, 0.02

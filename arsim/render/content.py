@@ -12,6 +12,9 @@ import numpy as np
 
 from arsim.core.conventions import normalize
 from arsim.core.errors import ArsimError
+from arsim.core.resample import to_layout
+from arsim.lighting.bases import parse_basis
+from arsim.lighting.bases.lightmap import Surface, bake_directional, probe_samples
 from arsim.render.meshes import Mesh, grid_mesh, load_mesh, uv_sphere
 from arsim.render.renderer import Material, SceneObject
 
@@ -132,30 +135,135 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
     return model
 
 
+LIGHTINGS = ("ibl", "lightmap-ao", "inm-BASIS")
+
+
+def parse_lighting(o) -> str:
+    """An object's lighting ([[render.objects]] lighting): "ibl", "lightmap-ao" or "inm-<basis><count>"
+    (checked: an unknown basis or a count it does not have raises ArsimError)."""
+    if o.lighting in ("ibl", "lightmap-ao"):
+        return "ibl" if o.lighting == "lightmap-ao" and not o.light_map else o.lighting
+    if not o.lighting.startswith("inm-"):
+        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\": use ibl, lightmap-ao or inm-BASIS "
+                         f"(e.g. inm-modh6, inm-h4, inm-sh9)")
+    if o.kind not in ("torus", "disc"):
+        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" needs a light map: kind torus or disc, not {o.kind}")
+    basis, count = parse_basis(o.lighting[4:])
+    return f"inm-{basis.name}{count}"
+
+
+def disc(radius: float, rings: int = 16, segments: int = 96) -> Mesh:
+    """A flat disc on the table (y slightly above 0), normal +y, tangent +x; both UV sets planar: u along
+    +x, v along -z (the bitangent n x t), the disc inscribed in the unit square."""
+    r, phi = np.meshgrid(np.linspace(0.0, radius, rings + 1), np.linspace(0.0, 2 * np.pi, segments + 1), indexing="ij")
+    x, z = r * np.cos(phi), -r * np.sin(phi)
+    points = np.stack([x, np.full_like(x, 1e-4 * radius), z], axis=-1)
+    normals = np.broadcast_to([0.0, 1.0, 0.0], points.shape)
+    tangents = np.broadcast_to([1.0, 0.0, 0.0], points.shape)
+    uvs = np.stack([0.5 + 0.5 * x / radius, 0.5 - 0.5 * z / radius], axis=-1)
+    return grid_mesh(points, normals, tangents, uvs)
+
+
+def disc_texels(radius: float, size: int, offset: np.ndarray) -> Surface:
+    """The disc's light-map texels (size x size over its square, row 0 at v = 1, i.e. z = -radius); texels
+    whose centre lies within a texel of the rim count, so that bilinear lookups at the rim have values."""
+    centre = (np.arange(size) + 0.5) / size
+    v, u = np.meshgrid(1.0 - centre, centre, indexing="ij")
+    x, z = (2 * u - 1) * radius, -(2 * v - 1) * radius
+    points = np.stack([x, np.zeros_like(x), z], axis=-1) + offset
+    normals = np.broadcast_to([0.0, 1.0, 0.0], points.shape).copy()
+    tangents = np.broadcast_to([1.0, 0.0, 0.0], points.shape).copy()
+    valid = np.hypot(x, z) <= radius * (1 + 2.0 / size)
+    return Surface(points, normals, tangents, valid)
+
+
+def _torus_object(o, x: float, z: float, lighting: str) -> SceneObject:
+    minor = 0.4 * o.size_m
+    offset = np.array([x, 0.0, z])
+    size = (o.lightmap_size, 2 * o.lightmap_size)
+
+    def texels() -> Surface:
+        points, normals, tangents = torus_texels(o.size_m, minor, size)
+        return Surface(points + offset, normals, tangents, np.ones(size, bool))
+
+    material = Material(o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if lighting == "lightmap-ao" else None,
+                        ridges_normal_map() if o.normal_map else None, o.method,
+                        basis=lighting[4:] if lighting.startswith("inm-") else "")
+    return SceneObject(torus(o.size_m, minor), material, translation(x, 0.0, z), torus_lods(o.size_m, minor, 96),
+                       lightmap_surface=texels, distance=lambda p: torus_distance(p - offset, o.size_m, minor))
+
+
+def _disc_object(o, x: float, z: float, lighting: str) -> SceneObject:
+    if lighting == "lightmap-ao":
+        lighting = "ibl"  # (the thesis bakes occlusion for the torus only)
+    offset = np.array([x, 0.0, z])
+    material = Material(o.kd, o.ks, o.exponent, method=o.method, basis=lighting[4:] if lighting.startswith("inm-") else "")
+    return SceneObject(disc(o.size_m), material, translation(x, 0.0, z),
+                       lightmap_surface=lambda: disc_texels(o.size_m, o.lightmap_size, offset))
+
+
 def scene_objects(section) -> list[SceneObject]:
     """The scenario's virtual objects ([[render.objects]], a RenderObjectSection each) as SceneObjects; a
-    mesh that cannot be read raises ArsimError."""
+    mesh that cannot be read, or a lighting that cannot be, raises ArsimError. Directional light maps
+    (lighting = inm-...) are baked later, from the light: light_objects."""
     objects = []
     for o in section.objects:
         x, z = o.position_m
+        lighting = parse_lighting(o)
         if o.kind == "sphere_row":
             spacing = 2.6 * o.size_m
             for k, exponent in enumerate(SPHERE_EXPONENTS):
                 dx = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
+                centre = np.array([x + dx, o.size_m, z])
                 objects.append(SceneObject(uv_sphere(o.size_m, 32, 64), Material(o.kd, o.ks, exponent, method=o.method),
-                                           translation(x + dx, o.size_m, z), sphere=o.size_m))
+                                           translation(*centre), sphere=o.size_m,
+                                           distance=_sphere_distance(centre, o.size_m)))
         elif o.kind == "sphere":
+            centre = np.array([x, o.size_m, z])
             objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent, method=o.method),
-                                       translation(x, o.size_m, z), sphere=o.size_m))
+                                       translation(*centre), sphere=o.size_m, distance=_sphere_distance(centre, o.size_m)))
         elif o.kind == "mesh":
             objects.append(mesh_object(o))
+        elif o.kind == "disc":
+            objects.append(_disc_object(o, x, z, lighting))
         else:
-            minor = 0.4 * o.size_m
-            objects.append(SceneObject(torus(o.size_m, minor), Material(
-                o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if o.light_map else None,
-                ridges_normal_map() if o.normal_map else None, o.method), translation(x, 0.0, z),
-                torus_lods(o.size_m, minor, 96)))
+            objects.append(_torus_object(o, x, z, lighting))
     return objects
+
+
+def _sphere_distance(centre: np.ndarray, radius: float):
+    return lambda p: np.linalg.norm(p - centre, axis=-1) - radius
+
+
+LIGHT_SIZE = 32  # the light's angle map the directional light maps sum (every texel's energy kept)
+
+
+def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneObject]:
+    """The objects with their directional light maps (lighting = inm-...) baked from an angle-map light
+    (world frame): visibility against every object with a distance function and the table top."""
+    import dataclasses
+
+    pending = [o for o in objects if o.material.basis and o.lightmap_surface is not None]
+    if not pending:
+        return objects
+    shapes = [o.distance for o in objects if o.distance is not None]
+    scale = 0.01  # metres: the hit and step floors of the sphere tracing
+
+    def distance(p):
+        return np.minimum.reduce([p[..., 1]] + [d(p) for d in shapes])
+
+    def blocked(origins, directions):
+        return sphere_trace(origins + directions * 2e-5, directions, distance, scale, 2.0)
+
+    directions, weighted = probe_samples(to_layout(light, "anglemap", LIGHT_SIZE))
+    out = []
+    for o in objects:
+        if o.material.basis and o.lightmap_surface is not None:
+            basis, count = parse_basis(o.material.basis)
+            coefficients = bake_directional(o.lightmap_surface(), basis, count, directions, weighted, blocked)
+            o = dataclasses.replace(o, material=dataclasses.replace(o.material, directional_map=coefficients))
+        out.append(o)
+    return out
 
 
 def mesh_object(o) -> SceneObject:

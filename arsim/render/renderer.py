@@ -79,6 +79,11 @@ class SceneObject:
     # light and normal maps it is drawn as a camera-facing quad that the fragment shader ray-casts (the
     # exact outline and normals, from two triangles: llvmpipe spends about a microsecond per triangle).
     sphere: float | None = None
+    # For baking its directional light map (irradiance normal mapping): its light map's texels in world
+    # space (a lighting.bases.lightmap.Surface), and its distance function in world space (what it
+    # occludes); None where it has none.
+    lightmap_surface: object = None  # () -> Surface
+    distance: object = None  # (points (..., 3)) -> (...)
 
 
 # Level of detail: the coarsest mesh whose departure from the surface stays under this many pixels on the

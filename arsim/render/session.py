@@ -20,11 +20,12 @@ from arsim.core.errors import ArsimError
 from arsim.core.files import atomic_path, write_bytes_atomic
 from arsim.core.gl import create_gl_context
 from arsim.core.png import png_bytes
-from arsim.evaluate.recording_plots import recording_camera
 from arsim.evaluate.profile import ProfileRun
+from arsim.evaluate.recording_plots import recording_camera
 from arsim.evaluate.tracking import TrackingRun, measure_poses
 from arsim.lighting.methods import bake
 from arsim.render.baking import BakeSettings, LoopBaker
+from arsim.render.content import light_objects
 from arsim.render.loop import GL_STEPS, FrameLoop, Shading
 from arsim.render.renderer import Renderer, SceneObject
 from arsim.sensors.recording import Recording
@@ -115,13 +116,17 @@ def _renderer(camera, maps: dict, ctx, method: str, objects: list[SceneObject]) 
 
 def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_maps: dict, out_dir: Path,
                 objects: list[SceneObject], settings: SessionSettings = SessionSettings(),
+                truth_objects: list[SceneObject] | None = None,
                 progress: Callable[[float], None] = lambda fraction: None) -> SessionResult:
     """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
     (per method, per exponent: from the captured probe, or baked before) and truth frames lit by
-    `truth_maps` (the same from the true environment); writes frames/*.png and session.mp4 into out_dir."""
+    `truth_maps` (the same from the true environment); writes frames/*.png and session.mp4 into out_dir.
+    truth_objects: the objects as the truth frames show them, where their directional light maps were
+    baked from the true environment (light_objects); default: `objects`."""
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code)
-    captured, true_light = (_renderer(camera, light, ctx, settings.method, objects) for light in (maps, truth_maps))
+    captured = _renderer(camera, maps, ctx, settings.method, objects)
+    true_light = _renderer(camera, truth_maps, ctx, settings.method, objects if truth_objects is None else truth_objects)
     indices = np.arange(0, len(rec.frames), settings.every)
     count = len(indices)
     saved = set(settings.saved_frames or indices[np.linspace(0, count - 1, 4).round().astype(int)].tolist())
@@ -191,7 +196,7 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code)
     needed = maps_needed(objects, settings.method)
-    renderer = _renderer(camera, session_maps(probe, needed), ctx, settings.method, objects)
+    renderer = _renderer(camera, session_maps(probe, needed), ctx, settings.method, light_objects(objects, probe))
     baker = LoopBaker(probe, needed[settings.method], bake_settings, ctx)
     loop = FrameLoop(ctx, tracker, renderer, Shading(settings.key, settings.white, settings.log_average), settings.overlay,
                      settings.method, baker, budget_ms, pose_cache={} if poses is None else poses)

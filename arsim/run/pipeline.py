@@ -79,7 +79,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.evaluate.profile import ProfileRun, write_profile
     from arsim.lighting.bake_output import write_bake
     from arsim.lighting.methods import MapParameters, bake
-    from arsim.render.content import scene_objects
+    from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, maps_needed, run_session
     from arsim.run.report import write_report
     from arsim.scenario.environment import load_environment
@@ -159,7 +159,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     # 4. The AR session over the AR path, and its render-loop profile.
     session_settings = SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay, flip_every=r.flip_every)
     with step("session", "4/5 rendering the AR session") as update:
-        session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, objects, session_settings,
+        session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe),
+                              session_settings, truth_objects=light_objects(objects, truth),
                               progress=lambda f: update(completed=f))
     (out / "profile").mkdir(exist_ok=True)
     write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")

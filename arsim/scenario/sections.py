@@ -176,22 +176,30 @@ MAP_METHODS = ("accurate", "bounds", "fast", "mipmap", "sh", "mc")  # arsim.ligh
 class RenderObjectSection:
     """[[render.objects]]: a virtual object standing on the table (the tag's centre is the origin)."""
 
-    kind: str = setting("torus", choices=("torus", "sphere", "sphere_row", "mesh"),
+    kind: str = setting("torus", choices=("torus", "sphere", "sphere_row", "mesh", "disc"),
                         help="torus (normal map, baked AO light map), sphere, sphere_row (exponents 1 to 1280), "
-                             "or mesh (a triangle mesh file: `mesh`)")
+                             "mesh (a triangle mesh file: `mesh`), or disc (a flat disc on the table under the others, "
+                             "where their contact shadows show with lighting = inm-...)")
     mesh: Path | None = setting(None, must_exist=True,
                                 help="kind = mesh: OBJ, PLY, STL, OFF or glTF file; relative to the scenario, then to assets/")
     position_m: tuple[float, float] = setting((0.0, 0.0), min=-100.0, max=100.0, unit="m",
                                               help="where it stands: world x and z (a row: its centre)")
     size_m: float = setting(0.05, min=0.001, max=10.0, unit="m",
-                            help="torus: ring radius; sphere and row: sphere radius; mesh: the largest side of its bounding box")
+                            help="torus: ring radius; sphere and row: sphere radius; mesh: the largest side of its bounding box; "
+                                 "disc: its radius")
     kd: tuple[float, float, float] = setting((0.7, 0.55, 0.4), min=0.0, max=1.0, help="diffuse coefficient k_d (RGB)")
     ks: tuple[float, float, float] = setting((0.2, 0.2, 0.2), min=0.0, max=1.0, help="specular coefficient k_s (RGB)")
     exponent: float = setting(80.0, min=1.0, max=100000.0, help="Phong exponent: the reflection map used (not for a row)")
     method: str = setting("", choices=("",) + MAP_METHODS,
                           help="map method of this object's maps (default \"\": [render] method)")
     normal_map: bool = setting(True, help="torus, and a mesh with texture coordinates: the tangent-space ridges normal map")
-    light_map: bool = setting(True, help="torus: its baked ambient-occlusion light map")
+    light_map: bool = setting(True, help="torus: its baked ambient-occlusion light map (lighting = lightmap-ao)")
+    lighting: str = setting("lightmap-ao",
+                            help="torus and disc: ibl (the irradiance map at the perturbed normal), lightmap-ao (that times "
+                                 "the ambient-occlusion light map: the thesis; ibl where light_map = false), or inm-BASIS "
+                                 "(a directional light map baked from the light with visibility, e.g. inm-modh6, inm-h4, "
+                                 "inm-sh9, inm-hl2; see arsim bases compare)")
+    lightmap_size: int = setting(32, min=1, max=4096, help="torus and disc with lighting = inm-...: texels of the directional light map's shorter side")
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ orthogonal over the hemisphere) G^-1 makes it the best fit all the same.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from math import log, pi, sqrt
 
 import numpy as np
@@ -17,7 +17,7 @@ from arsim.lighting.bases.functions import Basis, get_basis, sh9
 from arsim.lighting.bases.quadrature import hemisphere_quadrature
 
 
-@lru_cache(maxsize=None)
+@cache
 def _quadrature() -> tuple[np.ndarray, np.ndarray]:
     return hemisphere_quadrature()
 
