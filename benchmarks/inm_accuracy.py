@@ -35,10 +35,11 @@ def main() -> None:
         start = time.perf_counter()
         lightings = [(get_basis(name), count, q) for name, count in entries for q in (False, True)]
         comparison = compare_on_torus(probe, lightings, width, height)
-        if args.images:
-            comparison_strip(comparison, Path(args.images) / f"inm_{Path(env).stem}.png")
         for label, result in scores(comparison).items():
-            print(f"{env:<14} {label:<22} {result['flip']:8.4f} {result['mse']:9.5f}")
+            print(f"{env:<14} {label:<22} {result['flip']:8.4f} {result['mse']:9.5f}", flush=True)
+        if args.images:
+            Path(args.images).mkdir(parents=True, exist_ok=True)
+            comparison_strip(comparison, Path(args.images) / f"inm_{Path(env).stem}.png")
         print(f"({time.perf_counter() - start:.0f} s)")
 
 
