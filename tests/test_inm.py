@@ -160,3 +160,11 @@ def test_a_light_map_size_of_zero_is_refused_in_one_line(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "inm-modh6"\nlightmap_size = 0\n')
     assert_one_line_error(arsim("validate", path), "lightmap_size")
+
+
+def test_more_terms_than_the_basis_has_are_refused_in_one_line(tmp_path):
+    from tests.test_cli import arsim, assert_one_line_error
+
+    path = tmp_path / "bad.toml"
+    path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "inm-h4"\ninm_terms = 6\n')
+    assert_one_line_error(arsim("render", path, "-o", tmp_path / "out"), "inm_terms = 6")

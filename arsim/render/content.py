@@ -149,6 +149,8 @@ def parse_lighting(o) -> str:
     if o.kind not in ("torus", "disc"):
         raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" needs a light map: kind torus or disc, not {o.kind}")
     basis, count = parse_basis(o.lighting[4:])
+    if o.inm_terms > count:
+        raise ArsimError(f"[[render.objects]] inm_terms = {o.inm_terms}: {o.lighting} has {count} terms; give 1 to {count} (0: all)")
     return f"inm-{basis.name}{count}"
 
 
@@ -188,7 +190,7 @@ def _torus_object(o, x: float, z: float, lighting: str) -> SceneObject:
 
     material = Material(o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if lighting == "lightmap-ao" else None,
                         ridges_normal_map() if o.normal_map else None, o.method,
-                        basis=lighting[4:] if lighting.startswith("inm-") else "")
+                        basis=lighting[4:] if lighting.startswith("inm-") else "", inm_terms=o.inm_terms or None)
     return SceneObject(torus(o.size_m, minor), material, translation(x, 0.0, z), torus_lods(o.size_m, minor, 96),
                        lightmap_surface=texels, distance=lambda p: torus_distance(p - offset, o.size_m, minor))
 
@@ -197,7 +199,8 @@ def _disc_object(o, x: float, z: float, lighting: str) -> SceneObject:
     if lighting == "lightmap-ao":
         lighting = "ibl"  # (the thesis bakes occlusion for the torus only)
     offset = np.array([x, 0.0, z])
-    material = Material(o.kd, o.ks, o.exponent, method=o.method, basis=lighting[4:] if lighting.startswith("inm-") else "")
+    material = Material(o.kd, o.ks, o.exponent, method=o.method, basis=lighting[4:] if lighting.startswith("inm-") else "",
+                        inm_terms=o.inm_terms or None)
     return SceneObject(disc(o.size_m), material, translation(x, 0.0, z),
                        lightmap_surface=lambda: disc_texels(o.size_m, o.lightmap_size, offset))
 

@@ -199,6 +199,9 @@ class RenderObjectSection:
                                  "the ambient-occlusion light map: the thesis; ibl where light_map = false), or inm-BASIS "
                                  "(a directional light map baked from the light with visibility, e.g. inm-modh6, inm-h4, "
                                  "inm-sh9, inm-hl2; see arsim bases compare)")
+    inm_terms: int = setting(0, min=0, max=9,
+                             help="lighting = inm-...: the spec's level of detail, the leading terms summed (1: the constant "
+                                  "term, the light map; 4: with the linear ones; 0: all)")
     lightmap_size: int = setting(32, min=1, max=4096, help="torus and disc with lighting = inm-...: texels of the directional light map's shorter side")
 
 
