@@ -168,3 +168,21 @@ def test_more_terms_than_the_basis_has_are_refused_in_one_line(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "inm-h4"\ninm_terms = 6\n')
     assert_one_line_error(arsim("render", path, "-o", tmp_path / "out"), "inm_terms = 6")
+
+
+def test_objects_that_move_are_lit_through_the_scenes_irradiance_volume(tmp_path):
+    from arsim.render.content import VOLUME_GRID, light_objects, scene_objects
+    from arsim.scenario import load_scenario
+
+    path = tmp_path / "volume.toml"
+    path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "ibl"\n'
+                    '[[render.objects]]\nkind = "sphere"\nposition_m = [0.12, 0.0]\nsize_m = 0.02\nlighting = "volume"\n')
+    torus, sphere = light_objects(scene_objects(load_scenario(path).render), to_layout(read_hdr(ENVMAPS[1]), "anglemap", 32))
+    assert torus.material.irradiance_volume is None and sphere.material.volume_lit
+    coefficients, low, high = sphere.material.irradiance_volume
+    assert coefficients.shape == VOLUME_GRID + (9, 3)
+    assert low[0] < -0.07 and high[0] > 0.14  # the box holds both objects
+    # beside the torus, near the table: a normal facing the torus gets less light than one facing away
+    c = sample_volume(coefficients, low, high, np.array([0.085, 0.01, 0.0]))
+    toward, away = volume_irradiance(c, np.array([-1.0, 0.0, 0.0])), volume_irradiance(c, np.array([1.0, 0.0, 0.0]))
+    assert toward.mean() < 0.8 * away.mean(), (toward, away)

@@ -266,3 +266,20 @@ def test_a_directional_light_map_of_the_wrong_shape_is_refused(gl, maps):
         render(gl, maps, Material(KD, KS, 80.0, directional_map=np.zeros((8, 8, 4, 3)), basis="modh6"))
     with pytest.raises(ArsimError, match="unknown basis"):
         render(gl, maps, Material(KD, KS, 80.0, directional_map=np.zeros((8, 8, 4, 3)), basis="nope4"))
+
+
+@pytest.mark.parametrize("impostor", [False, True])
+def test_an_irradiance_volume_equals_the_numpy_reference(gl, maps, impostor):
+    """A sphere lit through an irradiance volume (diffuse only): GL against shading.volume_diffuse at the
+    world points and normals GL shaded (debug targets)."""
+    rng = np.random.default_rng(7)
+    coefficients = rng.uniform(-0.3, 0.3, (4, 3, 5, 9, 3))
+    coefficients[..., 0, :] = rng.uniform(3.0, 4.0, (4, 3, 5, 3))
+    volume = (coefficients, np.array([-0.15, 0.0, -0.12]), np.array([0.15, 0.22, 0.12]))
+    r = render(gl, maps, Material(KD, (0.0, 0.0, 0.0), 80.0, irradiance_volume=volume), debug=True, impostor=impostor)
+    hdr, mask = r.read_hdr(), r.read_mask() > 0.5
+    normal, point = (v[..., :3].astype(np.float64) for v in r.read_debug())
+    assert 0.03 < mask.mean() < 0.5
+    reference = np.array(KD) * shading.volume_diffuse(volume, point[mask], normal[mask])
+    rel = np.abs(hdr[mask] - reference) / np.abs(reference)
+    assert rel.max() < 1e-3, rel.max()  # (RGBA16F, as test_gl_shading_equals_the_numpy_reference)

@@ -14,7 +14,7 @@ from arsim.core.conventions import normalize
 from arsim.core.errors import ArsimError
 from arsim.core.resample import to_layout
 from arsim.lighting.bases import parse_basis
-from arsim.lighting.bases.lightmap import Surface, bake_directional, probe_samples
+from arsim.lighting.bases.lightmap import Surface, bake_directional, bake_irradiance_volume, probe_samples
 from arsim.render.meshes import Mesh, grid_mesh, load_mesh, uv_sphere
 from arsim.render.renderer import Material, SceneObject
 
@@ -135,16 +135,16 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
     return model
 
 
-LIGHTINGS = ("ibl", "lightmap-ao", "inm-BASIS")
+LIGHTINGS = ("ibl", "lightmap-ao", "volume", "inm-BASIS")
 
 
 def parse_lighting(o) -> str:
     """An object's lighting ([[render.objects]] lighting): "ibl", "lightmap-ao" or "inm-<basis><count>"
     (checked: an unknown basis or a count it does not have raises ArsimError)."""
-    if o.lighting in ("ibl", "lightmap-ao"):
+    if o.lighting in ("ibl", "lightmap-ao", "volume"):
         return "ibl" if o.lighting == "lightmap-ao" and not o.light_map else o.lighting
     if not o.lighting.startswith("inm-"):
-        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\": use ibl, lightmap-ao or inm-BASIS "
+        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\": use ibl, lightmap-ao, volume or inm-BASIS "
                          f"(e.g. inm-modh6, inm-h4, inm-sh9)")
     if o.kind not in ("torus", "disc"):
         raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" needs a light map: kind torus or disc, not {o.kind}")
@@ -213,6 +213,7 @@ def scene_objects(section) -> list[SceneObject]:
     for o in section.objects:
         x, z = o.position_m
         lighting = parse_lighting(o)
+        added = len(objects)
         if o.kind == "sphere_row":
             spacing = 2.6 * o.size_m
             for k, exponent in enumerate(SPHERE_EXPONENTS):
@@ -231,6 +232,12 @@ def scene_objects(section) -> list[SceneObject]:
             objects.append(_disc_object(o, x, z, lighting))
         else:
             objects.append(_torus_object(o, x, z, lighting))
+        if lighting == "volume":
+            import dataclasses
+
+            for k in range(added, len(objects)):
+                material = dataclasses.replace(objects[k].material, volume_lit=True, light_map=None)
+                objects[k] = dataclasses.replace(objects[k], material=material)
     return objects
 
 
@@ -241,15 +248,20 @@ def _sphere_distance(centre: np.ndarray, radius: float):
 LIGHT_SIZE = 32  # the light's angle map the directional light maps sum (every texel's energy kept)
 
 
+VOLUME_GRID = (9, 5, 9)  # grid points of the irradiance volume over the objects' box (x, y, z)
+
+
 def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneObject]:
-    """The objects with their directional light maps (lighting = inm-...) baked from an angle-map light
-    (world frame): visibility against every object with a distance function and the table top."""
+    """The objects with their directional light maps (lighting = inm-...) and the scene's irradiance
+    volume (lighting = volume) baked from an angle-map light (world frame): visibility against the
+    table top and every object with a distance function, except those lit by the volume (they move)."""
     import dataclasses
 
-    pending = [o for o in objects if o.material.basis and o.lightmap_surface is not None]
-    if not pending:
+    inm = [o.material.basis and o.lightmap_surface is not None for o in objects]
+    lit_by_volume = [o.material.volume_lit for o in objects]
+    if not any(inm) and not any(lit_by_volume):
         return objects
-    shapes = [o.distance for o in objects if o.distance is not None]
+    shapes = [o.distance for o, moving in zip(objects, lit_by_volume) if o.distance is not None and not moving]
     scale = 0.01  # metres: the hit and step floors of the sphere tracing
 
     def distance(p):
@@ -259,12 +271,22 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
         return sphere_trace(origins + directions * 2e-5, directions, distance, scale, 2.0)
 
     directions, weighted = probe_samples(to_layout(light, "anglemap", LIGHT_SIZE))
+    volume = None
+    if any(lit_by_volume):
+        corners = np.concatenate([o.corners() for o in objects])
+        low, high = corners.min(axis=0) - 0.02, corners.max(axis=0) + 0.02
+        low[1] = max(low[1], 1e-3)  # (grid points on the table would see nothing of the lower half)
+        axes = [np.linspace(low[i], high[i], VOLUME_GRID[i]) for i in range(3)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+        volume = (bake_irradiance_volume(grid, directions, weighted, blocked), low, high)
     out = []
-    for o in objects:
-        if o.material.basis and o.lightmap_surface is not None:
+    for o, baked, moving in zip(objects, inm, lit_by_volume):
+        if baked:
             basis, count = parse_basis(o.material.basis)
             coefficients = bake_directional(o.lightmap_surface(), basis, count, directions, weighted, blocked)
             o = dataclasses.replace(o, material=dataclasses.replace(o.material, directional_map=coefficients))
+        elif moving:
+            o = dataclasses.replace(o, material=dataclasses.replace(o.material, irradiance_volume=volume))
         out.append(o)
     return out
 

@@ -65,6 +65,11 @@ class Material:
     directional_map: np.ndarray | None = None
     basis: str = ""
     inm_terms: int | None = None
+    # An irradiance volume (spec 1.9, for objects that move): (coefficients (X, Y, Z, 9, 3) of the
+    # convolved SH in world axes at grid points spanning the box, low (3,), high (3,)); it replaces the
+    # irradiance map in the diffuse part.
+    irradiance_volume: tuple | None = None
+    volume_lit: bool = False  # to be lit through the scene's irradiance volume (content.light_objects bakes it)
 
 
 @dataclass
@@ -84,6 +89,12 @@ class SceneObject:
     # occludes); None where it has none.
     lightmap_surface: object = None  # () -> Surface
     distance: object = None  # (points (..., 3)) -> (...)
+
+    def corners(self) -> np.ndarray:
+        """(8, 3) the world corners of its mesh's bounding box."""
+        low, high = self.mesh.positions.min(axis=0), self.mesh.positions.max(axis=0)
+        box = np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
+        return (box @ self.model.T)[:, :3]
 
 
 # Level of detail: the coarsest mesh whose departure from the surface stays under this many pixels on the
@@ -211,6 +222,17 @@ class Renderer:
         texture.build_mipmaps()
         return texture
 
+    def _volume_textures(self, volume: np.ndarray) -> list:
+        """Nine float RGB 3D textures (clamped at the box's faces), one per SH coefficient, of an (X, Y, Z, 9,
+        3) volume."""
+        out = []
+        for k in range(9):
+            data = np.ascontiguousarray(np.transpose(volume[:, :, :, k, :], (2, 1, 0, 3)).astype(np.float32))
+            texture = self.ctx.texture3d(volume.shape[:3], 3, data.tobytes(), dtype="f4")
+            texture.repeat_x = texture.repeat_y = texture.repeat_z = False
+            out.append(texture)
+        return out
+
     def add(self, obj: SceneObject) -> None:
         m = obj.material
         method = m.method or self.default_method
@@ -231,11 +253,20 @@ class Renderer:
             if not 1 <= terms <= count:
                 raise ArsimError(f"inm_terms {terms}: the {m.basis} light map has 1 to {count} terms")
             defines += ["INM", f"BASIS_{basis.name.upper()}", f"BASIS_COUNT {count}"]
+        if m.irradiance_volume is not None:
+            if m.directional_map is not None:
+                raise ArsimError("a material takes a directional light map or an irradiance volume, not both")
+            volume = np.asarray(m.irradiance_volume[0])
+            if volume.ndim != 5 or volume.shape[3:] != (9, 3) or min(volume.shape[:3]) < 2:
+                raise ArsimError(f"an irradiance volume holds (X, Y, Z, 9, 3) coefficients on at least 2 points per axis, "
+                                 f"not {volume.shape}")
+            defines.append("VOLUME")
         defines += ["DEBUG"] if self.debug else []
         defines += ["FLOAT_FILTERING"] if "llvmpipe" in self.ctx.info["GL_RENDERER"] else []
         scale = np.abs(np.linalg.eigvalsh(obj.model[:3, :3].T @ obj.model[:3, :3])).max() ** 0.5
         sphere = None
         if obj.sphere is not None and m.light_map is None and m.normal_map is None and m.directional_map is None:
+            # (an irradiance volume is read at the ray-cast hit: the impostor serves it too)
             defines.append("SPHERE_IMPOSTOR")
             program = self.ctx.program(vertex_shader=_source("sphere.vert", defines), fragment_shader=_source("object.frag", defines))
             quad = np.array([(-1, -1), (1, -1), (-1, 1), (-1, 1), (1, -1), (1, 1)], dtype="f4")  # counter-clockwise
@@ -258,6 +289,12 @@ class Renderer:
                     "coefficient_map": self._coefficient_texture(m.directional_map) if m.directional_map is not None else None}
         if terms:
             program["inm_terms"].value = terms
+        volume_textures = []
+        if m.irradiance_volume is not None:
+            volume, low, high = m.irradiance_volume
+            volume_textures = self._volume_textures(np.asarray(volume))
+            program["volume_low"].value, program["volume_high"].value = tuple(map(float, low)), tuple(map(float, high))
+            program["volume_size"].value = tuple(float(n) for n in np.asarray(volume).shape[:3])
         # What does not change from frame to frame, set once: each object has its own program.
         program["kd"].value, program["ks"].value = tuple(m.kd), tuple(m.ks)
         units = [self.maps[method, 1.0], self.maps[method, float(m.exponent)]] + [t for t in textures.values() if t is not None]
@@ -265,6 +302,9 @@ class Renderer:
         for unit, name in enumerate(names):
             if name in program:  # (a directional light map replaces the irradiance map: the compiler drops it)
                 program[name].value = unit
+        if volume_textures:
+            program["volume"].value = list(range(len(units), len(units) + len(volume_textures)))
+            units += volume_textures
         texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
                                                   max(tex.size[:2])) for name, tex in textures.items() if tex is not None}
         low, high = obj.mesh.positions.min(axis=0), obj.mesh.positions.max(axis=0)

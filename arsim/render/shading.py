@@ -56,6 +56,16 @@ def inm_diffuse(coefficients: np.ndarray, basis: str, normal_tangent: np.ndarray
     return np.einsum("...k,...kc->...c", values, np.asarray(coefficients)[..., :terms, :]) / np.pi
 
 
+def volume_diffuse(volume: tuple, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """An irradiance volume's diffuse term, E / pi, at world points and normals (..., 3): the coefficients
+    interpolated trilinearly (clamped at the box's faces), SH bands 0-2 at the normal."""
+    from arsim.lighting.bases.lightmap import sample_volume, volume_irradiance
+
+    coefficients, low, high = volume
+    return volume_irradiance(sample_volume(np.asarray(coefficients), np.asarray(low), np.asarray(high), points),
+                             normalize(normals)) / np.pi
+
+
 def average_luminance(hdr: np.ndarray, mask: np.ndarray, log_average: bool = False) -> float:
     """The scene's average luminance over the masked pixels: their mean, what the top of the mip chain
     gives (thesis 5.3.4), or Reinhard's log-average exp(mean(log(delta + L_w)))."""

@@ -195,10 +195,12 @@ class RenderObjectSection:
     normal_map: bool = setting(True, help="torus, and a mesh with texture coordinates: the tangent-space ridges normal map")
     light_map: bool = setting(True, help="torus: its baked ambient-occlusion light map (lighting = lightmap-ao)")
     lighting: str = setting("lightmap-ao",
-                            help="torus and disc: ibl (the irradiance map at the perturbed normal), lightmap-ao (that times "
-                                 "the ambient-occlusion light map: the thesis; ibl where light_map = false), or inm-BASIS "
-                                 "(a directional light map baked from the light with visibility, e.g. inm-modh6, inm-h4, "
-                                 "inm-sh9, inm-hl2; see arsim bases compare)")
+                            help="ibl (the irradiance map at the perturbed normal), lightmap-ao (torus: that times the "
+                                 "ambient-occlusion light map, the thesis; ibl where light_map = false), volume (the "
+                                 "scene's irradiance volume, for objects that move: SH bands 0-2 on a grid over the objects, "
+                                 "with the other objects' occlusion), or inm-BASIS (torus and disc: a directional light map "
+                                 "baked from the light with visibility, e.g. inm-modh6, inm-h4, inm-sh9, inm-hl2; see arsim "
+                                 "bases compare)")
     inm_terms: int = setting(0, min=0, max=9,
                              help="lighting = inm-...: the spec's level of detail, the leading terms summed (1: the constant "
                                   "term, the light map; 4: with the linear ones; 0: all)")

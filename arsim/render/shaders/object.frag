@@ -19,6 +19,13 @@ uniform float light_map_lod;        // its mip level for this object this frame 
 uniform sampler2D normal_map;
 uniform float normal_map_lod;
 #endif
+#ifdef VOLUME
+uniform sampler3D volume[9];        // an irradiance volume: per grid point the convolved SH of bands 0-2
+uniform vec3 volume_low;            // (world axes), a texture per coefficient; the grid spans low..high
+uniform vec3 volume_high;
+uniform vec3 volume_size;           // grid points per axis
+const float VOLUME_PI = 3.14159265358979;
+#endif
 #ifdef INM
 uniform sampler2DArray coefficient_map;  // a layer per basis coefficient of the irradiance (second UV set)
 uniform float coefficient_map_lod;
@@ -110,6 +117,26 @@ void main() {
         irradiance += basis[k] * textureLod(coefficient_map, vec3(v_uv2, float(k)), coefficient_map_lod).rgb;
     }
     vec3 diffuse = irradiance / BASES_PI;
+#elif defined(VOLUME)
+    // An irradiance volume: the coefficients interpolated at the fragment's world position (grid points
+    // on the box's corners, so texel centres map to them), SH bands 0-2 at the world normal.
+#ifdef SPHERE_IMPOSTOR
+    vec3 p = hit;
+#else
+    vec3 p = v_world;
+#endif
+    vec3 f = clamp((p - volume_low) / (volume_high - volume_low), 0.0, 1.0);
+    vec3 uvw = (f * (volume_size - 1.0) + 0.5) / volume_size;
+    float sh[9];
+    sh[0] = 0.5 / sqrt(VOLUME_PI);
+    float c1 = 0.5 * sqrt(3.0 / VOLUME_PI), c2 = 0.5 * sqrt(15.0 / VOLUME_PI), c3 = 0.25 * sqrt(5.0 / VOLUME_PI);
+    sh[1] = c1 * n.y; sh[2] = c1 * n.z; sh[3] = c1 * n.x; sh[4] = c2 * n.x * n.y; sh[5] = c2 * n.y * n.z;
+    sh[6] = c3 * (3.0 * n.z * n.z - 1.0); sh[7] = c2 * n.z * n.x; sh[8] = 0.5 * c2 * (n.x * n.x - n.y * n.y);
+    vec3 irradiance = vec3(0.0);
+    for (int k = 0; k < 9; k++) {
+        irradiance += sh[k] * texture(volume[k], uvw).rgb;
+    }
+    vec3 diffuse = irradiance / VOLUME_PI;
 #else
     // Alg. 5.4 line 9 uses the unperturbed n_w here, a typo for n (see render/shading.py).
     vec3 diffuse = lookup(irradiance_map, n) * light;
@@ -118,7 +145,15 @@ void main() {
     hdr = vec4(kd * diffuse + ks * specular, 1.0);
     mask = vec4(1.0, log(LOG_DELTA + dot(hdr.rgb, vec3(0.299, 0.587, 0.114))), 0.0, 0.0);
 #ifdef DEBUG
-#ifdef INM
+#if defined(VOLUME)
+#ifdef SPHERE_IMPOSTOR
+    debug_normal = vec4(n, 0.0);
+    debug_incident = vec4(hit, 0.0);     // the world point the volume was read at
+#else
+    debug_normal = vec4(n, 0.0);
+    debug_incident = vec4(v_world, 0.0);
+#endif
+#elif defined(INM)
     debug_normal = vec4(n_ts, v_uv2.x);  // what the NumPy reference evaluates the light map with
     debug_incident = vec4(v, v_uv2.y);
 #else
