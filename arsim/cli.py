@@ -470,8 +470,9 @@ def cmd_bases_compare(args: argparse.Namespace) -> int:
     visual = visual_comparison(plane_lighting(env, args.sun_elevation, 30.0, args.sun_share), selected=selected)
     paths += [out / "visual.png", out / "visual_errors.png"]
     visual_figures(visual, paths[-2], paths[-1], f"{Path(env_path).name}, sun at {args.sun_elevation:g} degrees elevation")
+    visual_errors = visual.errors()
     for key, stats in comparison.summary().items():
-        print(f"{key:<14} mean error {100 * stats['mean']:8.3f} %   visual {100 * visual.errors()[key]:7.3f} %")
+        print(f"{key:<14} mean error {100 * stats['mean']:8.3f} %   visual {100 * visual_errors[key]:7.3f} %")
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0
 

@@ -76,13 +76,15 @@ def signal_irradiance(signal: Signal, normals: np.ndarray) -> np.ndarray:
     return irradiance(normals, signal.directions, signal.radiance_weighted, signal.lights, signal.light_power)
 
 
-def fitted(basis_name: str, count: int, signal: Signal, e: np.ndarray, d: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """E~ at the rule's directions d for one basis and count (sh-rh: the spec's SH route)."""
+def fitted(basis_name: str, count: int, signal: Signal, e: np.ndarray, d: np.ndarray, w: np.ndarray,
+           at: np.ndarray) -> np.ndarray:
+    """E~ at the normals `at` for one basis and count, fitted to E (values e at the rule's directions d,
+    weights w; sh-rh: the spec's SH route, from the signal itself)."""
     if basis_name == SH_RH:
         coeffs = sh9_irradiance_coefficients(signal.directions, signal.radiance_weighted, signal.lights, signal.light_power)
-        return sh9(d)[:, :count] @ coeffs[:count, 0]
+        return sh9(at)[..., :count] @ coeffs[:count].reshape((count,) + e.shape[1:])
     basis = BASES[basis_name]
-    return reconstruct(basis, count, project(basis, count, e, d, w), d)
+    return reconstruct(basis, count, project(basis, count, e, d, w), at)
 
 
 def entries() -> list[tuple[str, int]]:
@@ -132,7 +134,7 @@ def compare_bases(signals: int, seed: int = 0, selected: list[tuple[str, int]] |
         e = signal_irradiance(signal, d)[:, 0]
         norm = float(w @ (e * e))
         for name, count in chosen:
-            residual = fitted(name, count, signal, e, d, w) - e
+            residual = fitted(name, count, signal, e, d, w, d) - e
             result.errors[f"{name} {count}"].append(float(w @ (residual * residual)) / norm)
         progress(k + 1)
     return result
@@ -146,11 +148,11 @@ def _label(key: str) -> str:
 def markdown(c: BasesComparison) -> str:
     s = c.summary()
     lines = ["# Irradiance normal mapping: bases compared", "",
-             f"Relative integrated squared error, int (E - E~)^2 / int E^2 over the hemisphere of normals, over "
-             f"{c.signals} random signals (seed {c.seed}; how they are drawn: `arsim/evaluate/compare_bases.py`). "
-             "Each basis holds the least-squares fit of E over the hemisphere; `SH, spec route` is SH as the "
-             "irradiance-normal-mapping spec bakes it (radiance projected over the sphere, convolved with the "
-             "clamped cosine).", ""]
+             (f"Relative integrated squared error, int (E - E~)^2 / int E^2 over the hemisphere of normals, over "
+              f"{c.signals} random signals (seed {c.seed}; how they are drawn: `arsim/evaluate/compare_bases.py`). "
+              "Each basis holds the least-squares fit of E over the hemisphere; `SH, spec route` is SH as the "
+              "irradiance-normal-mapping spec bakes it (radiance projected over the sphere, convolved with the "
+              "clamped cosine)."), ""]
     for count in COUNTS:
         keys = sorted((k for k in s if int(k.split()[1]) == count), key=lambda k: s[k]["mean"])
         if not keys:
@@ -163,22 +165,23 @@ def markdown(c: BasesComparison) -> str:
 
 
 WHY = ["## Why this order", "",
-       "- A least-squares fit over the hemisphere depends only on the span of the functions. SH's first four and "
-       "the H-basis's four both span {1, x, y, z}, so they fit alike; the modified H-basis spans what the H-basis "
-       "does (H3mod = sqrt(3)/2 H1 - H3/2), so it fits exactly as well, while H1 alone is the light map.",
-       "- Irradiance is a smooth, nearly quadratic function of the normal (the clamped cosine's SH fall off fast "
-       "with the band: bands 0-2 hold almost all of it; Ramamoorthi and Hanrahan). So the polynomial bases up to "
-       "degree 2 fit best for their counts: H6 adds xy and x^2 - y^2 to {1, x, y, z}; SH9 also has z^2, yz and zx, "
-       "three more functions, and fits better still.",
-       "- Half-Life 2's three functions span {x, y, z}: no constant. A uniform sky's irradiance is a constant; "
-       "held as a multiple of z it falls to zero at the horizon. Zernike's three hold the constant and gradients "
-       "across the surface (x, y over sqrt(1 + z)), but nothing that changes with elevation.",
-       "- The shifted bases (HSH, Makhotkin) map the sphere's pole -z onto the horizon circle: along it every "
-       "function is constant (HSH) or zero (Makhotkin, whose functions carry sqrt(z)). With few bands they cannot "
-       "vary along the border, and their errors gather at grazing normals (visual_errors.png); Makhotkin's, zero "
-       "there, are the worst of their count.",
-       "- SH by the spec's route fits irradiance over the whole sphere of normals, half of which a surface never "
-       "shows; fitted over the hemisphere, the same functions do better.", ""]
+       ("- A least-squares fit over the hemisphere depends only on the span of the functions. SH's first four and "
+        "the H-basis's four both span {1, x, y, z}, so they fit alike; the modified H-basis spans what the H-basis "
+        "does (H3mod = sqrt(3)/2 H1 - H3/2), so it fits exactly as well, while H1 alone is the light map."),
+       ("- Irradiance is a smooth, nearly quadratic function of the normal (the clamped cosine's SH fall off fast "
+        "with the band: bands 0-2 hold almost all of it; Ramamoorthi and Hanrahan). So the polynomial bases up to "
+        "degree 2 fit best for their counts: H6 adds xy and x^2 - y^2 to {1, x, y, z}; SH9 also has z^2, yz and zx, "
+        "three more functions, and fits better still."),
+       ("- Half-Life 2's three functions span {x, y, z}: no constant. A uniform sky's irradiance is a constant; "
+        "held as a multiple of z it falls to zero at the horizon. Zernike's three hold the constant and gradients "
+        "across the surface (x, y over sqrt(1 + z)), but nothing that changes with elevation."),
+       ("- The shifted bases (HSH, Makhotkin) map the sphere's pole -z onto the horizon circle: along it every "
+        "function is constant (HSH) or zero (Makhotkin, whose functions carry sqrt(z)). With few bands they cannot "
+        "vary along the border, and their errors gather at grazing normals (visual_errors.png); Makhotkin's, zero "
+        "there, are the worst of their count."),
+       ("- SH by the spec's route fits irradiance over the whole sphere of normals, half of which a surface never "
+        "shows; fitted over the hemisphere, the same functions do better."),
+       ""]
 
 
 def bar_plot(c: BasesComparison, path: Path) -> None:
@@ -274,14 +277,7 @@ def visual_comparison(signal: Signal, size: int = 192, domes: int = 3,
     reference = signal_irradiance(signal, normals)
     d, w = hemisphere_quadrature()
     e = signal_irradiance(signal, d)  # (K, 3)
-    tiles = {}
-    for name, count in selected or entries():
-        if name == SH_RH:
-            coeffs = sh9_irradiance_coefficients(signal.directions, signal.radiance_weighted, signal.lights, signal.light_power)
-            tiles[f"{name} {count}"] = sh9(normals)[..., :count] @ coeffs[:count]
-        else:
-            basis = BASES[name]
-            tiles[f"{name} {count}"] = reconstruct(basis, count, project(basis, count, e, d, w), normals)
+    tiles = {f"{name} {count}": fitted(name, count, signal, e, d, w, normals) for name, count in selected or entries()}
     return VisualComparison(reference, tiles)
 
 

@@ -112,14 +112,12 @@ class LoopBaker:
 
     def _shaded(self, tile) -> int:
         """The texels the GL shades for a tile: every texel of each 4 x 4 block that holds a disk texel."""
+        if tile in self.shaded:
+            return self.shaded[tile]
         inside = self.gl.inside[tile.row0:tile.row0 + tile.size, tile.col0:tile.col0 + tile.size]
         b = max(min(BLOCK, tile.size), 1)
         blocks = inside.reshape(inside.shape[0] // b, b, inside.shape[1] // b, b).any(axis=(1, 3))
-        return int(blocks.sum()) * b * b
-
-    def _shaded_cached(self, tile) -> int:
-        if tile not in self.shaded:
-            self.shaded[tile] = self._shaded(tile)
+        self.shaded[tile] = int(blocks.sum()) * b * b
         return self.shaded[tile]
 
     def _count(self, piece: Piece) -> int:
@@ -129,7 +127,7 @@ class LoopBaker:
     def _work(self, piece: Piece) -> float:
         """A piece's work in units the GL time is proportional to: the texels shaded times the input terms
         each sums."""
-        return float(self._shaded_cached(piece.tile)) * self._count(piece)
+        return float(self._shaded(piece.tile)) * self._count(piece)
 
     def _split_quadrants(self) -> bool:
         """(SH) Split the head of the queue, a whole tile, into its four quadrants (row by row, the
@@ -173,7 +171,7 @@ class LoopBaker:
                 left -= predicted
                 continue
             if self.gl.splits_inputs:
-                count = int((left - TILE_OVERHEAD_MS) / (self._shaded_cached(head.tile) * cost))
+                count = int((left - TILE_OVERHEAD_MS) / (self._shaded(head.tile) * cost))
                 if count >= MIN_RANGE:
                     batch.append(self._take_inputs(count))
                 break

@@ -8,6 +8,8 @@ Object space: y up, the object standing on the table plane y = 0.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from arsim.core.conventions import normalize
@@ -135,12 +137,10 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
     return model
 
 
-LIGHTINGS = ("ibl", "lightmap-ao", "volume", "inm-BASIS")
-
-
 def parse_lighting(o) -> str:
-    """An object's lighting ([[render.objects]] lighting): "ibl", "lightmap-ao" or "inm-<basis><count>"
-    (checked: an unknown basis or a count it does not have raises ArsimError)."""
+    """An object's lighting ([[render.objects]] lighting): "ibl", "lightmap-ao", "volume" or
+    "inm-<basis><count>" (checked: an unknown basis, a count it does not have, or more inm_terms, raises
+    ArsimError)."""
     if o.lighting in ("ibl", "lightmap-ao", "volume"):
         return "ibl" if o.lighting == "lightmap-ao" and not o.light_map else o.lighting
     if not o.lighting.startswith("inm-"):
@@ -233,8 +233,6 @@ def scene_objects(section) -> list[SceneObject]:
         else:
             objects.append(_torus_object(o, x, z, lighting))
         if lighting == "volume":
-            import dataclasses
-
             for k in range(added, len(objects)):
                 material = dataclasses.replace(objects[k].material, volume_lit=True, light_map=None)
                 objects[k] = dataclasses.replace(objects[k], material=material)
@@ -255,8 +253,6 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
     """The objects with their directional light maps (lighting = inm-...) and the scene's irradiance
     volume (lighting = volume) baked from an angle-map light (world frame): visibility against the
     table top and every object with a distance function, except those lit by the volume (they move)."""
-    import dataclasses
-
     inm = [o.material.basis and o.lightmap_surface is not None for o in objects]
     lit_by_volume = [o.material.volume_lit for o in objects]
     if not any(inm) and not any(lit_by_volume):

@@ -307,9 +307,8 @@ class Renderer:
             units += volume_textures
         texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
                                                   max(tex.size[:2])) for name, tex in textures.items() if tex is not None}
-        low, high = obj.mesh.positions.min(axis=0), obj.mesh.positions.max(axis=0)
-        corners = np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
-        self.objects.append(_Drawable(program, vaos, errors, units, corners @ obj.model.T, texel_world, sphere))
+        corners = np.hstack([obj.corners(), np.ones((8, 1))])
+        self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere))
         self.corners = np.stack([d.corners for d in self.objects])
 
     def screen_rects(self, view_projection: np.ndarray) -> list[tuple[int, int, int, int]]:

@@ -188,8 +188,8 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
                 bake_settings: BakeSettings, budget_ms: float, max_frames: int, out_dir: Path | None = None,
                 settings: SessionSettings = SessionSettings(method="mipmap", overlay=True), tail_frames: int = 30,
                 poses: dict | None = None, progress: Callable[[float], None] = lambda fraction: None) -> ProfileRun:
-    """The render loop over the AR path's frames, along it and back again and again, while step 3 bakes the objects' maps
-    from `probe` with `bake_settings` (the objects lit by `settings.method` maps meanwhile), until the
+    """The render loop over the AR path's frames, along it and back again and again, while step 3 bakes
+    the objects' maps from `probe` with `bake_settings` (the objects lit by `settings.method` maps meanwhile), until the
     bake is complete and tail_frames more, or max_frames. The tracker runs once per recorded frame (its
     pose is kept in `poses` for the next lap, and the next run). With out_dir, frames at a quarter and a
     half of the bake and after it go to out_dir/frames (the progress display)."""

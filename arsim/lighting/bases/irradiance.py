@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 CHUNK = 4096  # normals per block of the sums (keeps the (normals x samples) products small)
+COSINE_KERNEL = np.array([np.pi] + [2 * np.pi / 3] * 3 + [np.pi / 4] * 5)  # a_l of bands 0-2 (Ramamoorthi, Hanrahan)
 
 
 def irradiance(normals: np.ndarray, directions: np.ndarray, radiance_weighted: np.ndarray,
@@ -40,4 +41,4 @@ def sh9_irradiance_coefficients(directions: np.ndarray, radiance_weighted: np.nd
     if lights is not None and len(lights):
         visible = np.asarray(lights)[:, 2] > 0
         coeffs += sh9(np.asarray(lights)[visible]).T @ np.asarray(light_power, dtype=np.float64)[visible]
-    return coeffs * np.array([np.pi] + [2 * np.pi / 3] * 3 + [np.pi / 4] * 5)[:, None]
+    return coeffs * COSINE_KERNEL[:, None]

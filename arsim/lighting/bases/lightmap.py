@@ -24,11 +24,11 @@ import numpy as np
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.core.errors import ArsimError
 from arsim.lighting.bases.functions import Basis, sh9
+from arsim.lighting.bases.irradiance import COSINE_KERNEL
 from arsim.lighting.bases.projection import from_sh9_matrix
 from arsim.lighting.bases.quadrature import hemisphere_quadrature
 
 RANGE = 0.75  # the spec's range-compression factor for the coefficients after the constant one
-COSINE_KERNEL = np.array([np.pi] + [2 * np.pi / 3] * 3 + [np.pi / 4] * 5)  # a_l of bands 0-2
 
 
 def probe_samples(probe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -70,8 +70,10 @@ def bake_directional(surface: Surface, basis: Basis, count: int, directions: np.
     basis.check(count)
     if route not in ("direct", "sh9"):
         raise ArsimError(f"light-map route '{route}': use direct or sh9")
-    to_basis = from_sh9_matrix(basis, count) * COSINE_KERNEL  # (count, 9): convolution, then the fit
-    fit_normals, fit = _direct_fit(basis, count)
+    if route == "sh9":
+        to_basis = from_sh9_matrix(basis, count) * COSINE_KERNEL  # (count, 9): convolution, then the fit
+    else:
+        fit_normals, fit = _direct_fit(basis, count)
     h, w = surface.valid.shape
     out = np.zeros((h * w, count, 3))
     index = np.flatnonzero(surface.valid.reshape(-1))
@@ -111,11 +113,6 @@ def decode_8bit(codes: np.ndarray, scale: float) -> np.ndarray:
     out[..., 0, :] = v[..., 0, :] ** 2.2
     out[..., 1:, :] = v[..., 1:, :] * 2 * RANGE - RANGE
     return out * scale
-
-
-def check_lightmap_size(size: int) -> None:
-    if size < 1:
-        raise ArsimError(f"light-map size {size}: give at least 1 texel (e.g. 64)")
 
 
 def bake_irradiance_volume(points: np.ndarray, directions: np.ndarray, radiance_weighted: np.ndarray,
