@@ -13,7 +13,7 @@ import numpy as np
 from arsim import __version__
 from arsim.core.assets import assets_dir
 from arsim.core.errors import ArsimError
-from arsim.core.files import write_text_atomic
+from arsim.core.files import json_text, write_text_atomic
 from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
 from arsim.core.image_stats import image_stats
 from arsim.core.progress import progress_bar
@@ -251,7 +251,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     source = str(args.env) if args.env is not None else ", ".join(map(str, args.maps)) if args.maps else "captured"
     metrics = session.metrics() | {"method": method, "methods": needed, "map_size": map_size, "log_average": log_average,
                                    "probe": source}
-    write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    write_text_atomic(out / "metrics.json", json_text(metrics))
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: tracking p95 "
           f"{metrics['tracking_rot_err_deg_p95']:.2f} degrees, {metrics['tracking_trans_err_pct_p95']:.2f} % of the distance; "
           f"FLIP against the truth frame {metrics['flip_mean']:.4f}; metrics in {out / 'metrics.json'}")

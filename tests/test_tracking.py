@@ -62,3 +62,25 @@ def test_linearised_frames_remove_the_distance_bias_of_the_codes(ar_recording):
         ratios.append(float(np.median(estimated / truth)))
     assert ratios[0] > 1.002  # the codes: the tag looks smaller, farther away
     assert abs(ratios[1] - 1.0) < abs(ratios[0] - 1.0)
+
+
+def test_the_percentiles_are_infinite_when_many_visible_frames_are_lost_and_null_in_json():
+    """Seven visible frames, two lost: the 95th percentile is a lost frame's error, infinite (interpolating
+    between two infinite errors gave NaN), and metrics.json says null."""
+    import json
+
+    from arsim.core.files import json_text
+    from arsim.evaluate.tracking import TrackingRun
+    from arsim.tracking.apriltag import TagPose
+
+    found = TagPose(np.eye(3), np.zeros(3), np.zeros((4, 2)))
+    poses = [found] * 5 + [TagPose(None, None, None)] * 2
+    errors = np.array([0.1, 0.2, 0.3, 0.4, 0.5, np.inf, np.inf])
+    run = TrackingRun(poses, np.ones(7, bool), errors, errors * 10, errors * 2)
+    m = run.metrics()
+    assert m["tracking_rot_err_deg_p95"] == np.inf and m["frames_lost"] == 2
+    assert json.loads(json_text(m))["tracking_rot_err_deg_p95"] is None
+    # One lost frame in forty: the percentile is a found frame's error.
+    poses, errors = [found] * 39 + [TagPose(None, None, None)], np.append(np.linspace(0.1, 3.9, 39), np.inf)
+    m = TrackingRun(poses, np.ones(40, bool), errors, errors, errors).metrics()
+    assert m["tracking_rot_err_deg_p95"] == pytest.approx(3.9)

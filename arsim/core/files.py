@@ -1,8 +1,10 @@
-"""Atomic file writing: a file appears under its final name complete or not at all."""
+"""Atomic file writing: a file appears under its final name complete or not at all; strict JSON text."""
 
 from __future__ import annotations
 
 import contextlib
+import json
+import math
 import os
 import tempfile
 from collections.abc import Iterator
@@ -42,3 +44,22 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     """Write UTF-8 text to `path` atomically."""
     write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def _strict(value):
+    """value with every float that is not finite as None, and NumPy scalars as Python numbers."""
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    if hasattr(value, "tolist"):  # NumPy arrays and scalars
+        return _strict(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def json_text(value, indent: int | None = 2) -> str:
+    """Strict JSON (RFC 8259) of value, a newline at the end: a figure that is not finite (a percentile
+    that is infinite, a mean over no frames) is null, as JSON has no NaN or Infinity."""
+    return json.dumps(_strict(value), indent=indent, allow_nan=False) + "\n"

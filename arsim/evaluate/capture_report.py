@@ -3,7 +3,6 @@ EXR, and the coverage, drift and probe-versus-truth plots."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
@@ -12,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from arsim.capture.pipeline import CaptureResult
 from arsim.core.conventions import anglemap_disk_mask, anglemap_solid_angles
-from arsim.core.files import write_text_atomic
+from arsim.core.files import json_text, write_text_atomic
 from arsim.core.hdr_io import write_image
 from arsim.evaluate.metrics import map_error
 from arsim.evaluate.recording_plots import _pyplot, _save
@@ -160,5 +159,5 @@ def write_capture(result: CaptureResult, truth: np.ndarray, response_error: dict
     plot_drift(result, out_dir / "drift.png")
     plot_probe_vs_truth(complete, truth, out_dir / "probe_vs_truth.png")
     warning = brightest_warning(metrics)
-    write_text_atomic(out_dir / "metrics.json", json.dumps(metrics | {"warnings": [warning] if warning else []}, indent=2) + "\n")
+    write_text_atomic(out_dir / "metrics.json", json_text(metrics | {"warnings": [warning] if warning else []}))
     return metrics | {"warnings": [warning] if warning else []}

@@ -10,7 +10,6 @@ Identical frames cost a byte comparison.
 from __future__ import annotations
 
 import html
-import json
 import math
 import os
 from collections.abc import Callable
@@ -20,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from arsim.core.errors import ArsimError
-from arsim.core.files import write_bytes_atomic, write_text_atomic
+from arsim.core.files import json_text, write_bytes_atomic, write_text_atomic
 from arsim.core.png import png_bytes
 
 IMAGE_SUFFIXES = (".png",)
@@ -177,7 +176,7 @@ def run_diff(a: Path, b: Path, out_dir: Path | None = None, max_flip: float = DE
         result.frames.append(frame)
         progress((k + 1) / len(pairs))
     if out_dir is not None:
-        write_text_atomic(out_dir / "diff.json", json.dumps(result.summary(), indent=2) + "\n")
+        write_text_atomic(out_dir / "diff.json", json_text(result.summary()))
         write_text_atomic(out_dir / "index.html", diff_page(result, pairs, out_dir))
     return result
 

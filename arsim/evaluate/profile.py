@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from arsim.core.files import atomic_path, write_text_atomic
+from arsim.core.files import atomic_path, json_text, write_text_atomic
 from arsim.render.loop import FrameRecord
 
 FRAME_STEPS = ("bake", "background", "objects", "tone_mapping", "overlay")  # the render thread: steps 3-7
@@ -177,6 +177,6 @@ def write_profile(runs: list[ProfileRun], out_dir: Path) -> list[Path]:
         write_text_atomic(trace_path, json.dumps(run.trace()) + "\n")
         plot_timeline(run, plot_path)
         paths += [trace_path, plot_path]
-    write_text_atomic(out_dir / "profile.json", json.dumps({"runs": [r.summary() for r in runs]}, indent=2) + "\n")
+    write_text_atomic(out_dir / "profile.json", json_text({"runs": [r.summary() for r in runs]}))
     write_text_atomic(out_dir / "profile.md", markdown(runs))
     return paths + [out_dir / "profile.json", out_dir / "profile.md"]

@@ -23,7 +23,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 from arsim.core.errors import ArsimError
-from arsim.core.files import write_text_atomic
+from arsim.core.files import json_text, write_text_atomic
 
 # (key in the run's metrics, column title, digits)
 COLUMNS = (
@@ -137,7 +137,7 @@ def run_batch(scenarios: list[Path], out: Path, workers: int = 1, ray_address: s
     write_text_atomic(out / "summary.html", summary_html(summary))
     timing = {"backend": f"ray {ray_address}" if ray_address else f"local, {workers} workers", "wall_s": wall,
               "per_scenario_s": {Path(r["scenario"]).stem: r["wall_s"] for r in results}}
-    write_text_atomic(out / "summary.json", json.dumps(summary | {"timing": timing}, indent=2, default=float) + "\n")
+    write_text_atomic(out / "summary.json", json_text(summary | {"timing": timing}))
     return summary | {"timing": timing}
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import platform
 import time
 from collections.abc import Callable, Iterator
@@ -22,7 +21,7 @@ import numpy as np
 from arsim import __version__
 from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.errors import ArsimError
-from arsim.core.files import write_text_atomic
+from arsim.core.files import json_text, write_text_atomic
 from arsim.core.gl import create_gl_context
 from arsim.core.resample import to_layout
 from arsim.evaluate.metrics import map_error
@@ -169,7 +168,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     session_metrics = session.metrics()
     metrics = {"capture": {k: v for k, v in capture_metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
                "maps": map_metrics, "session": session_metrics}
-    write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
+    write_text_atomic(out / "metrics.json", json_text(metrics))
     with step("report", "5/5 writing the report") as update:
         write_report(out, scenario, source, metrics, session, maps)
     manifest = {
@@ -181,5 +180,5 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         "metrics": metrics,
         "files": _files_under(out, FILE_ROLES),
     }
-    write_text_atomic(out / "manifest.json", json.dumps(manifest, indent=2, default=float) + "\n")
+    write_text_atomic(out / "manifest.json", json_text(manifest))
     return manifest
