@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -252,8 +253,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     metrics = session.metrics() | {"method": method, "methods": needed, "map_size": map_size, "log_average": log_average,
                                    "probe": source}
     write_text_atomic(out / "metrics.json", json_text(metrics))
-    print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: tracking p95 "
-          f"{metrics['tracking_rot_err_deg_p95']:.2f} degrees, {metrics['tracking_trans_err_pct_p95']:.2f} % of the distance; "
+    print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: {_tracking_p95(metrics)}; "
           f"FLIP against the truth frame {metrics['flip_mean']:.4f}; metrics in {out / 'metrics.json'}")
     return 0
 
@@ -400,6 +400,18 @@ def _parameters(args: argparse.Namespace) -> MapParameters:
     return MapParameters(sh_order=args.sh_order, sh_faithful=args.sh_faithful, samples=args.samples, seed=args.seed)
 
 
+def _tracking_p95(m: dict) -> str:
+    """The tracking's 95th percentiles in words; infinite where more than 5 % of the frames with the tag
+    in view were lost (a lost frame counts as an infinite error)."""
+    rot, pct = m["tracking_rot_err_deg_p95"], m["tracking_trans_err_pct_p95"]
+    if m["frames_tag_visible"] == 0:
+        return "tracking p95 n/a (the tag was never wholly in view)"
+    if not (math.isfinite(rot) and math.isfinite(pct)):
+        lost = m["frames_tag_visible"] - round(m["detection_rate_visible"] * m["frames_tag_visible"])
+        return f"tracking p95 unbounded ({lost} of the {m['frames_tag_visible']} frames with the tag in view lost, more than 5 %)"
+    return f"tracking p95 {rot:.2f} degrees, {pct:.2f} % of the distance"
+
+
 def _output_dir(path: Path) -> Path:
     if path.exists() and not path.is_dir():
         raise ArsimError(f"{path}: exists and is not a folder; give a folder for -o")
@@ -503,9 +515,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     manifest = run_scenario(scenario, source, out, args.recording, stage)
     s = manifest["metrics"]["session"]
-    print(f"run {scenario.run.name} in {out}: {s['frames_total']} frames ({s['frames_lost']} with the tag lost), tracking p95 "
-          f"{s['tracking_rot_err_deg_p95']:.2f} degrees, FLIP against the truth frame {s['flip_mean']:.4f}; "
-          f"report {out / 'report' / 'index.html'}")
+    print(f"run {scenario.run.name} in {out}: {s['frames_total']} frames ({s['frames_lost']} with the tag lost), "
+          f"{_tracking_p95(s)}, FLIP against the truth frame {s['flip_mean']:.4f}; report {out / 'report' / 'index.html'}")
     if args.update_baseline:
         print(f"baseline written: {update_baseline(out, args.baseline)}")
     elif args.baseline is not None:

@@ -2,6 +2,8 @@
 plumbing against an independent route, visibility, 8-bit storage, and a normal-mapped torus lit through
 a modified-H light map against the per-pixel reference and the thesis's AO light map."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -186,3 +188,35 @@ def test_objects_that_move_are_lit_through_the_scenes_irradiance_volume(tmp_path
     c = sample_volume(coefficients, low, high, np.array([0.085, 0.01, 0.0]))
     toward, away = volume_irradiance(c, np.array([-1.0, 0.0, 0.0])), volume_irradiance(c, np.array([1.0, 0.0, 0.0]))
     assert toward.mean() < 0.8 * away.mean(), (toward, away)
+
+
+def test_the_volume_holds_an_orbiting_object_wherever_it_goes_and_it_occludes_nothing(tmp_path):
+    """A sphere going round the torus at 0.1 m: the volume's box holds its whole circle, and a grid point
+    on its circle sees the torus's occlusion only (the sphere, which moves, casts no baked shadow)."""
+    from arsim.render.content import light_objects, scene_objects
+    from arsim.scenario import load_scenario
+
+    path = tmp_path / "orbit.toml"
+    path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "ibl"\n'
+                    '[[render.objects]]\nkind = "sphere"\nsize_m = 0.02\nlighting = "volume"\norbit_m = 0.1\n')
+    light = to_layout(read_hdr(ENVMAPS[1]), "anglemap", 32)
+    torus, sphere = scene_objects(load_scenario(path).render)
+    assert sphere.orbit is not None and sphere.orbit.radius == 0.1
+    _, moving = light_objects([torus, sphere], light)
+    coefficients, low, high = moving.material.irradiance_volume
+    assert (low[[0, 2]] <= -0.12 + 1e-9).all() and (high[[0, 2]] >= 0.12 - 1e-9).all()
+    # the same as with no distance function for the sphere: it occludes nothing
+    _, ghost = light_objects([torus, dataclasses.replace(sphere, distance=None)], light)
+    np.testing.assert_array_equal(ghost.material.irradiance_volume[0], coefficients)
+    # and the torus does: below its top, the side of the circle's grid facing the torus gets less light
+    c = sample_volume(coefficients, low, high, np.array([0.1, 0.02, 0.0]))
+    toward, away = volume_irradiance(c, np.array([-1.0, 0.0, 0.0])), volume_irradiance(c, np.array([1.0, 0.0, 0.0]))
+    assert toward.mean() < 0.9 * away.mean(), (toward, away)
+
+
+def test_a_directional_light_map_on_an_object_that_moves_is_refused_in_one_line(tmp_path):
+    from tests.test_cli import arsim, assert_one_line_error
+
+    path = tmp_path / "bad.toml"
+    path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "inm-modh6"\norbit_m = 0.1\n')
+    assert_one_line_error(arsim("render", path, "-o", tmp_path / "out"), "orbit_m = 0.1")

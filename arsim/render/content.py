@@ -17,8 +17,9 @@ from arsim.core.errors import ArsimError
 from arsim.core.resample import to_layout
 from arsim.lighting.bases import parse_basis
 from arsim.lighting.bases.lightmap import Surface, bake_directional, bake_irradiance_volume, probe_samples
+from arsim.render.mesh_lightmap import lightmap_texels, lightmap_unwrap, ray_caster
 from arsim.render.meshes import Mesh, grid_mesh, load_mesh, uv_sphere
-from arsim.render.renderer import Material, SceneObject
+from arsim.render.renderer import Material, Orbit, SceneObject
 
 SPHERE_EXPONENTS = (1.0, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0)  # thesis figure 5.3
 
@@ -146,8 +147,11 @@ def parse_lighting(o) -> str:
     if not o.lighting.startswith("inm-"):
         raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\": use ibl, lightmap-ao, volume or inm-BASIS "
                          f"(e.g. inm-modh6, inm-h4, inm-sh9)")
-    if o.kind not in ("torus", "disc"):
-        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" needs a light map: kind torus or disc, not {o.kind}")
+    if o.kind not in ("torus", "disc", "mesh"):
+        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" needs a light map: kind torus, disc or mesh, not {o.kind}")
+    if o.orbit_m > 0:
+        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" with orbit_m = {o.orbit_m:g}: a directional light map "
+                         f"holds the light where the object stands; give an object that moves lighting = volume (or ibl)")
     basis, count = parse_basis(o.lighting[4:])
     if o.inm_terms > count:
         raise ArsimError(f"[[render.objects]] inm_terms = {o.inm_terms}: {o.lighting} has {count} terms; give 1 to {count} (0: all)")
@@ -227,15 +231,17 @@ def scene_objects(section) -> list[SceneObject]:
             objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent, method=o.method),
                                        translation(*centre), sphere=o.size_m, distance=_sphere_distance(centre, o.size_m)))
         elif o.kind == "mesh":
-            objects.append(mesh_object(o))
+            objects.append(mesh_object(o, lighting))
         elif o.kind == "disc":
             objects.append(_disc_object(o, x, z, lighting))
         else:
             objects.append(_torus_object(o, x, z, lighting))
-        if lighting == "volume":
-            for k in range(added, len(objects)):
+        for k in range(added, len(objects)):
+            if lighting == "volume":
                 material = dataclasses.replace(objects[k].material, volume_lit=True, light_map=None)
                 objects[k] = dataclasses.replace(objects[k], material=material)
+            if o.orbit_m > 0:
+                objects[k] = dataclasses.replace(objects[k], orbit=Orbit(o.orbit_m, o.orbit_period_s))
     return objects
 
 
@@ -252,24 +258,30 @@ VOLUME_GRID = (9, 5, 9)  # grid points of the irradiance volume over the objects
 def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneObject]:
     """The objects with their directional light maps (lighting = inm-...) and the scene's irradiance
     volume (lighting = volume) baked from an angle-map light (world frame): visibility against the
-    table top and every object with a distance function, except those lit by the volume (they move)."""
+    table top and every object with a distance function that stands still and is not lit by the volume
+    (those move, or may); the volume's box holds every object wherever it goes."""
     inm = [o.material.basis and o.lightmap_surface is not None for o in objects]
     lit_by_volume = [o.material.volume_lit for o in objects]
     if not any(inm) and not any(lit_by_volume):
         return objects
-    shapes = [o.distance for o, moving in zip(objects, lit_by_volume) if o.distance is not None and not moving]
+    shapes = [o.distance for o, moving in zip(objects, lit_by_volume) if o.distance is not None and not moving and o.orbit is None]
     scale = 0.01  # metres: the hit and step floors of the sphere tracing
 
     def distance(p):
         return np.minimum.reduce([p[..., 1]] + [d(p) for d in shapes])
 
+    still = [o for o, moving in zip(objects, lit_by_volume) if o.mesh_occludes and not moving and o.orbit is None]
+    meshes = ray_caster([(o.mesh, o.model) for o in still]) if still else None
+
     def blocked(origins, directions):
-        return sphere_trace(origins + directions * 2e-5, directions, distance, scale, 2.0)
+        origins = origins + directions * 2e-5
+        hit = sphere_trace(origins, directions, distance, scale, 2.0)
+        return hit | meshes(origins, directions) if meshes is not None else hit
 
     directions, weighted = probe_samples(to_layout(light, "anglemap", LIGHT_SIZE))
     volume = None
     if any(lit_by_volume):
-        corners = np.concatenate([o.corners() for o in objects])
+        corners = np.concatenate([o.swept_corners() for o in objects])
         low, high = corners.min(axis=0) - 0.02, corners.max(axis=0) + 0.02
         low[1] = max(low[1], 1e-3)  # (grid points on the table would see nothing of the lower half)
         axes = [np.linspace(low[i], high[i], VOLUME_GRID[i]) for i in range(3)]
@@ -287,10 +299,11 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
     return out
 
 
-def mesh_object(o) -> SceneObject:
+def mesh_object(o, lighting: str = "ibl") -> SceneObject:
     """A mesh file's object: scaled so that its bounding box's largest side is size_m, standing on the
     table (its lowest point at y = 0) with its box centred over position_m; the ridges normal map where
-    it has texture coordinates."""
+    it has texture coordinates. With lighting = inm-..., a second UV set unwrapped for its directional
+    light map (lightmap_size x lightmap_size at most)."""
     if o.mesh is None:
         raise ArsimError("[[render.objects]] kind = \"mesh\" needs mesh = \"FILE\" (an OBJ, PLY, STL, OFF or glTF file)")
     mesh, textured = load_mesh(o.mesh)
@@ -302,5 +315,10 @@ def mesh_object(o) -> SceneObject:
     centre = (low + high) / 2
     model = translation(o.position_m[0] - scale * centre[0], -scale * low[1], o.position_m[1] - scale * centre[2])
     model[:3, :3] *= scale
-    return SceneObject(mesh, Material(o.kd, o.ks, o.exponent, None, ridges_normal_map() if o.normal_map and textured else None,
-                                      o.method), model)
+    material = Material(o.kd, o.ks, o.exponent, None, ridges_normal_map() if o.normal_map and textured else None, o.method)
+    surface = None
+    if lighting.startswith("inm-"):
+        mesh, shape = lightmap_unwrap(mesh, o.lightmap_size)
+        material = dataclasses.replace(material, basis=lighting[4:], inm_terms=o.inm_terms or None)
+        surface = (lambda: lightmap_texels(mesh, model, shape))
+    return SceneObject(mesh, material, model, lightmap_surface=surface, mesh_occludes=True)

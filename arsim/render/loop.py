@@ -111,7 +111,7 @@ class FrameLoop:
             self.pose_cache[index] = poses[0]
         return poses[0]
 
-    def warm_up(self, frame: np.ndarray, index: int) -> None:
+    def warm_up(self, frame: np.ndarray, index: int, time_s: float = 0.0) -> None:
         """Run every pass once, unrecorded, as an app does while it loads: llvmpipe compiles a shader's
         machine code at its first draw (up to 100 ms), which would otherwise land in the first frames."""
         pose = self._pose(frame, index)
@@ -119,13 +119,15 @@ class FrameLoop:
             self.baker.warm_up()
         self.renderer.background_pass(frame)
         if pose.found:
-            self.renderer.render_objects(Rotation.from_matrix(pose.rotation), pose.translation)
+            self.renderer.render_objects(Rotation.from_matrix(pose.rotation), pose.translation, time_s)
             self.renderer.tonemap_pass(self.shading.key, self.shading.white, self.shading.log_average)
         if self.overlay:
             self.renderer.overlay_pass(["warming up"], self.baker.thumbnail if self.baker is not None else None)
         self.ctx.finish()
 
-    def run(self, frame: np.ndarray, index: int) -> tuple[TagPose, FrameRecord]:
+    def run(self, frame: np.ndarray, index: int, time_s: float = 0.0) -> tuple[TagPose, FrameRecord]:
+        """One frame: the recorded frame `index` (its pose is kept per index), taken at time_s (where the
+        objects that move are)."""
         now = time.perf_counter()
         if self.origin is None:
             self.origin = now
@@ -142,7 +144,7 @@ class FrameLoop:
         self._timed(record, "background", lambda: r.background_pass(frame))
         if pose.found:  # lost frames draw no object (as the thesis's app)
             rotation = Rotation.from_matrix(pose.rotation)
-            self._timed(record, "objects", lambda: r.render_objects(rotation, pose.translation))
+            self._timed(record, "objects", lambda: r.render_objects(rotation, pose.translation, time_s))
             self._timed(record, "tone_mapping", lambda: r.tonemap_pass(self.shading.key, self.shading.white, self.shading.log_average))
         else:
             r.no_objects()

@@ -72,6 +72,20 @@ class Material:
     volume_lit: bool = False  # to be lit through the scene's irradiance volume (content.light_objects bakes it)
 
 
+@dataclass(frozen=True)
+class Orbit:
+    """How an object moves: round a circle on the table about where it stands, counter-clockwise seen
+    from above, at the start on the circle's +z side."""
+
+    radius: float  # world units
+    period_s: float  # one turn
+
+    def offset(self, time_s: float) -> np.ndarray:
+        """(3,) the object's world displacement from where it stands at time_s."""
+        angle = 2.0 * np.pi * time_s / self.period_s
+        return self.radius * np.array([np.sin(angle), 0.0, np.cos(angle)])
+
+
 @dataclass
 class SceneObject:
     mesh: Mesh
@@ -89,12 +103,23 @@ class SceneObject:
     # occludes); None where it has none.
     lightmap_surface: object = None  # () -> Surface
     distance: object = None  # (points (..., 3)) -> (...)
+    mesh_occludes: bool = False  # it occludes by its mesh (ray casts): a mesh file's object, with no distance function
+    orbit: Orbit | None = None  # it moves (the model places it at the orbit's centre); None: it stands still
 
     def corners(self) -> np.ndarray:
-        """(8, 3) the world corners of its mesh's bounding box."""
+        """(8, 3) the world corners of its mesh's bounding box (where it stands)."""
         low, high = self.mesh.positions.min(axis=0), self.mesh.positions.max(axis=0)
         box = np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
         return (box @ self.model.T)[:, :3]
+
+    def swept_corners(self) -> np.ndarray:
+        """(8, 3) the corners of a world box that holds it wherever its orbit takes it."""
+        corners = self.corners()
+        if self.orbit is None:
+            return corners
+        reach = np.array([self.orbit.radius, 0.0, self.orbit.radius])
+        low, high = corners.min(axis=0) - reach, corners.max(axis=0) + reach
+        return np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] for k in range(8)])
 
 
 # Level of detail: the coarsest mesh whose departure from the surface stays under this many pixels on the
@@ -113,6 +138,8 @@ class _Drawable:
     corners: np.ndarray  # (8, 4) the world bounding box's corners, homogeneous
     texel_world: dict  # per texture: world length per texel along the surface (median over triangles)
     sphere: tuple[np.ndarray, float] | None = None  # a ray-cast sphere's world centre and radius
+    orbit: Orbit | None = None
+    model: np.ndarray | None = None  # where it stands (object to world), for one that moves
 
 
 @dataclass
@@ -308,8 +335,24 @@ class Renderer:
         texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
                                                   max(tex.size[:2])) for name, tex in textures.items() if tex is not None}
         corners = np.hstack([obj.corners(), np.ones((8, 1))])
-        self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere))
+        self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere, obj.orbit, obj.model.copy()))
         self.corners = np.stack([d.corners for d in self.objects])
+
+    def _move(self, time_s: float) -> None:
+        """The objects that move, placed where their orbits have them at time_s (model matrix, a sphere's
+        centre, the bounding box's corners)."""
+        for k, d in enumerate(self.objects):
+            if d.orbit is None:
+                continue
+            offset = d.orbit.offset(time_s)
+            model = d.model.copy()
+            model[:3, 3] += offset
+            if d.sphere is not None:
+                d.sphere = (model[:3, 3].astype(np.float64), d.sphere[1])
+                d.program["center"].value = tuple(d.sphere[0])
+            else:
+                d.program["model"].write(model.T.astype("f4").tobytes())
+            self.corners[k, :, :3] = d.corners[:, :3] + offset
 
     def screen_rects(self, view_projection: np.ndarray) -> list[tuple[int, int, int, int]]:
         """Per object that can be in view, the frame's rectangle (x, y from the bottom, w, h) that holds
@@ -347,9 +390,10 @@ class Renderer:
         self.rect = self.tile = None
         self.rects = []
 
-    def render_objects(self, rotation: Rotation, translation: np.ndarray) -> None:
+    def render_objects(self, rotation: Rotation, translation: np.ndarray, time_s: float = 0.0) -> None:
         """Step 5: the objects into the HDR colour and the mask, seen from the OpenCV world-to-camera
-        pose (x_cam = R x_world + t)."""
+        pose (x_cam = R x_world + t), those that move where they are at time_s."""
+        self._move(time_s)
         view = gl_view_from_opencv_pose(rotation, translation)
         view_projection = self.projection @ view
         eye = -rotation.as_matrix().T @ np.asarray(translation, dtype=np.float64)

@@ -141,7 +141,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
         video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
         for n, k in enumerate(indices):
             frame = read_frame(rec.folder / rec.frames[k]["file"])
-            pose, record = loop.run(frame, int(k))
+            pose, record = loop.run(frame, int(k), frame_time_s(rec, k))
             poses.append(pose)
             records.append(record)
             for name, ms in record.cpu_ms.items():
@@ -155,7 +155,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
             step_ms["readback"].append(1000 * (time.perf_counter() - start))
             if pose.found and (n % settings.flip_every == 0 or k in saved):
                 start = time.perf_counter()
-                true_light.render_objects(Rotation.from_matrix(pose.rotation), pose.translation)
+                true_light.render_objects(Rotation.from_matrix(pose.rotation), pose.translation, frame_time_s(rec, k))
                 true_light.background_pass(frame)
                 true_light.tonemap_pass(settings.key, settings.white, settings.log_average)
                 truth_frame = true_light.read_output()
@@ -172,6 +172,12 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
                 progress((n + 1) / count)
         video.release()
     return SessionResult(measure_poses(rec, poses, indices), indices, flips, step_ms, gl_ms, records)
+
+
+def frame_time_s(rec: Recording, k: int) -> float:
+    """The recorded frame k's time from the recording's first frame, seconds (where the objects that
+    move are in it)."""
+    return (rec.frames[k]["t_ns"] - rec.frames[0]["t_ns"]) * 1e-9
 
 
 def lap_frame(n: int, count: int) -> int:
@@ -212,12 +218,12 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
             decoded[k] = read_frame(rec.folder / rec.frames[k]["file"])
         return decoded[k]
 
-    loop.warm_up(camera_frame(0), 0)
+    loop.warm_up(camera_frame(0), 0, frame_time_s(rec, 0))
     records, after = [], 0
     for n in range(max_frames):
         k = lap_frame(n, len(rec.frames))
         frame = camera_frame(k)
-        _, record = loop.run(frame, k)
+        _, record = loop.run(frame, k, frame_time_s(rec, k))
         records.append(record)
         if out_dir is not None and marks and (loop.baked_in_use if marks[0] >= 1.0 else baker.progress >= marks[0]):
             name = f"bake_{int(100 * marks.pop(0)):03d}pct_frame{n:06d}.png"

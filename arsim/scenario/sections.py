@@ -205,6 +205,11 @@ class RenderObjectSection:
                              help="lighting = inm-...: the spec's level of detail, the leading terms summed (1: the constant "
                                   "term, the light map; 4: with the linear ones; 0: all)")
     lightmap_size: int = setting(32, min=1, max=4096, help="torus and disc with lighting = inm-...: texels of the directional light map's shorter side")
+    orbit_m: float = setting(0.0, min=0.0, max=100.0, unit="m",
+                             help="an object that moves: the radius of the circle it goes round about position_m on the "
+                                  "table, counter-clockwise seen from above (0: it stands still); it takes lighting = ibl, "
+                                  "lightmap-ao or volume (light maps are baked where objects stand)")
+    orbit_period_s: float = setting(8.0, min=0.1, max=3600.0, unit="s", help="orbit_m > 0: the time of one turn")
 
 
 @dataclass(frozen=True)

@@ -82,7 +82,7 @@ def bake_directional(surface: Surface, basis: Basis, count: int, directions: np.
     frames = np.stack([tangents, np.cross(normals, tangents), normals], axis=1)  # (T, 3, 3): rows t, b, n
     for start in range(0, len(index), chunk):
         sl = slice(start, start + chunk)
-        local = np.einsum("tij,kj->kti", frames[sl], directions)  # (K, T, 3) in each texel's frame
+        local = np.matmul(directions, frames[sl].transpose(0, 2, 1)).transpose(1, 0, 2)  # (K, T, 3) in each texel's frame
         weight = (local[..., 2] > 0).astype(np.float64)
         if blocked is not None:
             weight *= ~blocked(points[sl], np.broadcast_to(directions[:, None, :], local.shape))
@@ -90,9 +90,10 @@ def bake_directional(surface: Surface, basis: Basis, count: int, directions: np.
             sh = np.einsum("kts,kt,kc->tsc", sh9(local), weight, radiance_weighted)  # (T, 9, 3)
             out[index[sl]] = np.einsum("bs,tsc->tbc", to_basis, sh)
         else:
-            cosines = np.maximum(np.einsum("kti,ji->ktj", local, fit_normals), 0.0) * weight[..., None]
-            e = np.einsum("ktj,kc->tjc", cosines, radiance_weighted)  # (T, J, 3) at the fit rule's normals
-            out[index[sl]] = np.einsum("bj,tjc->tbc", fit, e)
+            # (matmul rather than einsum: BLAS, ten times as fast here)
+            cosines = np.maximum(local @ fit_normals.T, 0.0) * weight[..., None]  # (K, T, J)
+            e = np.matmul(cosines.transpose(1, 2, 0), radiance_weighted)  # (T, J, 3) at the fit rule's normals
+            out[index[sl]] = np.matmul(fit, e)
     return out.reshape(h, w, count, 3)
 
 
