@@ -58,16 +58,22 @@ def sphere_trace(origins: np.ndarray, directions: np.ndarray, distance, scale: f
     """Whether each ray (origins and directions broadcast together, (..., 3)) hits the surface of the
     distance function `distance` within `reach`: sphere tracing, each step the distance to the nearest
     surface; scale is the scene's small length (the hit and the step floors are fractions of it)."""
-    travelled = np.full(np.broadcast_shapes(origins.shape, directions.shape)[:-1], 1e-3 * scale)
-    hit = np.zeros(travelled.shape, dtype=bool)
+    shape = np.broadcast_shapes(origins.shape, directions.shape)
+    o = np.broadcast_to(origins, shape).reshape(-1, 3)
+    d = np.broadcast_to(directions, shape).reshape(-1, 3)
+    hit = np.zeros(len(o), dtype=bool)
+    active = np.arange(len(o))  # the rays still marching (most leave within a few steps: only these step on)
+    travelled = np.full(len(o), 1e-3 * scale)
     for _ in range(steps):
-        p = origins + directions * travelled[..., None]
-        d = distance(p)
-        hit |= d < 1e-4 * scale
-        travelled = np.where(hit, travelled, travelled + np.maximum(d, 1e-5 * scale))
-        if ((travelled > reach) | hit).all():
+        gap = distance(o[active] + d[active] * travelled[:, None])
+        touched = gap < 1e-4 * scale
+        hit[active[touched]] = True
+        travelled = travelled + np.maximum(gap, 1e-5 * scale)
+        going = ~touched & (travelled <= reach)
+        active, travelled = active[going], travelled[going]
+        if not len(active):
             break
-    return hit
+    return hit.reshape(shape[:-1])
 
 
 def torus_texels(major: float, minor: float, size: tuple[int, int]) -> tuple[np.ndarray, ...]:
