@@ -220,3 +220,26 @@ def test_a_directional_light_map_on_an_object_that_moves_is_refused_in_one_line(
     path = tmp_path / "bad.toml"
     path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "inm-modh6"\norbit_m = 0.1\n')
     assert_one_line_error(arsim("render", path, "-o", tmp_path / "out"), "orbit_m = 0.1")
+
+
+def test_a_sphere_gets_a_directional_light_map_shadowed_where_it_faces_the_torus(tmp_path):
+    """A sphere beside the torus with lighting = inm-modh6: its texels lie on the sphere, and at the
+    equator the constant term facing the torus is far below the one facing away (0.56 of it here)."""
+    from arsim.render.content import light_objects, scene_objects
+    from arsim.scenario import load_scenario
+
+    path = tmp_path / "sphere.toml"
+    path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "ibl"\n'
+                    '[[render.objects]]\nkind = "sphere"\nposition_m = [0.1, 0.0]\nsize_m = 0.02\nlighting = "inm-modh6"\n'
+                    'lightmap_size = 16\n')
+    torus, sphere = scene_objects(load_scenario(path).render)
+    surface = sphere.lightmap_surface()
+    centre = np.array([0.1, 0.02, 0.0])
+    np.testing.assert_allclose(np.linalg.norm(surface.points - centre, axis=-1), 0.02, rtol=1e-12)
+    _, baked = light_objects([torus, sphere], to_layout(read_hdr(ENVMAPS[1]), "anglemap", 32))
+    constant = baked.material.directional_map[..., 0, :].mean(axis=-1)  # (16, 32)
+    equator = np.abs(surface.normals[..., 1]) < 0.2
+    toward = equator & (surface.normals[..., 0] < -0.9)
+    away = equator & (surface.normals[..., 0] > 0.9)
+    assert toward.sum() >= 2 and away.sum() >= 2
+    assert constant[toward].mean() < 0.8 * constant[away].mean(), (constant[toward].mean(), constant[away].mean())

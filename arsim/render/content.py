@@ -153,8 +153,6 @@ def parse_lighting(o) -> str:
     if not o.lighting.startswith("inm-"):
         raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\": use ibl, lightmap-ao, volume or inm-BASIS "
                          f"(e.g. inm-modh6, inm-h4, inm-sh9)")
-    if o.kind not in ("torus", "disc", "mesh"):
-        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" needs a light map: kind torus, disc or mesh, not {o.kind}")
     if o.orbit_m > 0:
         raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" with orbit_m = {o.orbit_m:g}: a directional light map "
                          f"holds the light where the object stands; give an object that moves lighting = volume (or ibl)")
@@ -224,18 +222,12 @@ def scene_objects(section) -> list[SceneObject]:
         x, z = o.position_m
         lighting = parse_lighting(o)
         added = len(objects)
-        if o.kind == "sphere_row":
+        if o.kind in ("sphere_row", "sphere"):
+            row = o.kind == "sphere_row"
             spacing = 2.6 * o.size_m
-            for k, exponent in enumerate(SPHERE_EXPONENTS):
-                dx = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing
-                centre = np.array([x + dx, o.size_m, z])
-                objects.append(SceneObject(uv_sphere(o.size_m, 32, 64), Material(o.kd, o.ks, exponent, method=o.method),
-                                           translation(*centre), sphere=o.size_m,
-                                           distance=_sphere_distance(centre, o.size_m)))
-        elif o.kind == "sphere":
-            centre = np.array([x, o.size_m, z])
-            objects.append(SceneObject(uv_sphere(o.size_m, 48, 96), Material(o.kd, o.ks, o.exponent, method=o.method),
-                                       translation(*centre), sphere=o.size_m, distance=_sphere_distance(centre, o.size_m)))
+            for k, exponent in enumerate(SPHERE_EXPONENTS if row else (o.exponent,)):
+                dx = (k - (len(SPHERE_EXPONENTS) - 1) / 2) * spacing if row else 0.0
+                objects.append(_sphere_object(o, np.array([x + dx, o.size_m, z]), exponent, lighting, (32, 64) if row else (48, 96)))
         elif o.kind == "mesh":
             objects.append(mesh_object(o, lighting))
         elif o.kind == "disc":
@@ -253,6 +245,30 @@ def scene_objects(section) -> list[SceneObject]:
 
 def _sphere_distance(centre: np.ndarray, radius: float):
     return lambda p: np.linalg.norm(p - centre, axis=-1) - radius
+
+
+def sphere_texels(radius: float, size: tuple[int, int], centre: np.ndarray) -> Surface:
+    """The light-map texels (H x W, row 0 at v = 1) of a sphere in uv_sphere's parameterisation (u the
+    longitude / 2 pi, v = 1 - polar angle / pi), on the exact sphere, with uv_sphere's tangents."""
+    h, w = size
+    v, u = np.meshgrid(1.0 - (np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    theta, phi = np.pi * (1.0 - v), 2.0 * np.pi * u
+    normals = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), np.sin(theta) * np.cos(phi)], axis=-1)
+    tangents = np.stack([np.cos(phi), np.zeros_like(phi), -np.sin(phi)], axis=-1)
+    return Surface(centre + radius * normals, normals, tangents, np.ones(size, bool))
+
+
+def _sphere_object(o, centre: np.ndarray, exponent: float, lighting: str, tessellation: tuple[int, int]) -> SceneObject:
+    """A sphere of the scenario's (a row's: one of them) standing on the table at centre; with lighting =
+    inm-..., drawn as its mesh (the light map in its UVs), else ray-cast."""
+    if lighting == "lightmap-ao":
+        lighting = "ibl"  # (the thesis bakes occlusion for the torus only)
+    inm = lighting.startswith("inm-")
+    material = Material(o.kd, o.ks, exponent, method=o.method, basis=lighting[4:] if inm else "", inm_terms=o.inm_terms or None)
+    size = (o.lightmap_size, 2 * o.lightmap_size)
+    return SceneObject(uv_sphere(o.size_m, *tessellation), material, translation(*centre), sphere=o.size_m,
+                       distance=_sphere_distance(centre, o.size_m),
+                       lightmap_surface=(lambda: sphere_texels(o.size_m, size, centre)) if inm else None)
 
 
 LIGHT_SIZE = 32  # the light's angle map the directional light maps sum (every texel's energy kept)

@@ -198,13 +198,15 @@ class RenderObjectSection:
                             help="ibl (the irradiance map at the perturbed normal), lightmap-ao (torus: that times the "
                                  "ambient-occlusion light map, the thesis; ibl where light_map = false), volume (the "
                                  "scene's irradiance volume, for objects that move: SH bands 0-2 on a grid over the objects, "
-                                 "with the other objects' occlusion), or inm-BASIS (torus and disc: a directional light map "
-                                 "baked from the light with visibility, e.g. inm-modh6, inm-h4, inm-sh9, inm-hl2; see arsim "
+                                 "with the other objects' occlusion), or inm-BASIS (any kind that stands still: a directional "
+                                 "light map baked from the light with visibility, e.g. inm-modh6, inm-h4, inm-sh9, inm-hl2; see arsim "
                                  "bases compare)")
     inm_terms: int = setting(0, min=0, max=9,
                              help="lighting = inm-...: the spec's level of detail, the leading terms summed (1: the constant "
                                   "term, the light map; 4: with the linear ones; 0: all)")
-    lightmap_size: int = setting(32, min=1, max=4096, help="torus and disc with lighting = inm-...: texels of the directional light map's shorter side")
+    lightmap_size: int = setting(32, min=1, max=4096,
+                                 help="lighting = inm-...: texels of the directional light map's shorter side (a mesh: the most "
+                                      "on each side of its unwrapped atlas)")
     orbit_m: float = setting(0.0, min=0.0, max=100.0, unit="m",
                              help="an object that moves: the radius of the circle it goes round about position_m on the "
                                   "table, counter-clockwise seen from above (0: it stands still); it takes lighting = ibl, "
