@@ -280,25 +280,26 @@ VOLUME_GRID = (9, 5, 9)  # grid points of the irradiance volume over the objects
 def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneObject]:
     """The objects with their directional light maps (lighting = inm-...) and the scene's irradiance
     volume (lighting = volume) baked from an angle-map light (world frame): visibility against the
-    table top and every object with a distance function that stands still and is not lit by the volume
-    (those move, or may); the volume's box holds every object wherever it goes."""
+    table top and every object that stands still and is not lit by the volume (those move, or may), by
+    its distance function or its mesh; the volume's box holds every object wherever it goes."""
     inm = [o.material.basis and o.lightmap_surface is not None for o in objects]
     lit_by_volume = [o.material.volume_lit for o in objects]
     if not any(inm) and not any(lit_by_volume):
         return objects
-    shapes = [o.distance for o, moving in zip(objects, lit_by_volume) if o.distance is not None and not moving and o.orbit is None]
+    occluders = [o for o, moving in zip(objects, lit_by_volume) if not moving and o.orbit is None]
+    shapes = [o.distance for o in occluders if o.distance is not None]
     scale = 0.01  # metres: the hit and step floors of the sphere tracing
 
     def distance(p):
         return np.minimum.reduce([p[..., 1]] + [d(p) for d in shapes])
 
-    still = [o for o, moving in zip(objects, lit_by_volume) if o.mesh_occludes and not moving and o.orbit is None]
-    meshes = ray_caster([(o.mesh, o.model) for o in still]) if still else None
+    meshes = [(o.mesh, o.model) for o in occluders if o.mesh_occludes]
+    cast = ray_caster(meshes) if meshes else None
 
     def blocked(origins, directions):
         origins = origins + directions * 2e-5
         hit = sphere_trace(origins, directions, distance, scale, 2.0)
-        return hit | meshes(origins, directions) if meshes is not None else hit
+        return hit | cast(origins, directions) if cast is not None else hit
 
     directions, weighted = probe_samples(to_layout(light, "anglemap", LIGHT_SIZE))
     volume = None
