@@ -127,3 +127,17 @@ def test_a_mesh_without_directional_lighting_keeps_its_file_uvs(tmp_path):
     mesh, _ = load_mesh(tmp_path / "arch.obj")
     assert isinstance(obj.mesh, Mesh) and len(obj.mesh.positions) == len(mesh.positions) and obj.lightmap_surface is None
     assert GUTTER >= 1
+
+
+def test_a_light_map_too_small_for_the_meshs_charts_is_refused_in_one_line(tmp_path):
+    """200 separate triangles cannot be packed into 4 x 4 texels with gutters between them."""
+    import trimesh
+
+    from tests.test_cli import arsim, assert_one_line_error
+
+    corners = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]])
+    offsets = np.stack(np.meshgrid(np.arange(20), np.arange(10), indexing="ij"), -1).reshape(-1, 2) * 0.02
+    vertices = (corners[None] + np.pad(offsets, ((0, 0), (0, 1)))[:, None, [0, 2, 1]]).reshape(-1, 3)
+    trimesh.Trimesh(vertices, np.arange(len(vertices)).reshape(-1, 3), process=False).export(tmp_path / "bits.obj")
+    (tmp_path / "s.toml").write_text('[[render.objects]]\nkind = "mesh"\nmesh = "bits.obj"\nlighting = "inm-h4"\nlightmap_size = 4\n')
+    assert_one_line_error(arsim("render", tmp_path / "s.toml", "-o", tmp_path / "out"), "give a larger lightmap_size")

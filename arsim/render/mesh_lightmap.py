@@ -13,6 +13,7 @@ import numpy as np
 from scipy import ndimage
 
 from arsim.core.conventions import normalize
+from arsim.core.errors import ArsimError
 from arsim.lighting.bases.lightmap import Surface
 from arsim.render.meshes import Mesh
 
@@ -36,8 +37,11 @@ def lightmap_unwrap(mesh: Mesh, size: int) -> tuple[Mesh, tuple[int, int]]:
         pack.resolution, pack.padding, pack.bilinear = size, GUTTER, True
         pack.texels_per_unit = float(size * np.sqrt(fill / max(area, 1e-30)))
         atlas.generate(pack_options=pack)
-        if atlas.atlas_count == 1 or fill < 1e-3:
+        if atlas.atlas_count == 1:
             break
+        if fill < 1e-3:
+            raise ArsimError(f"the mesh's {atlas.chart_count} light-map charts do not fit one {size} x {size} atlas; "
+                             f"give a larger lightmap_size")
         fill *= 0.8
     vertex, indices, uvs2 = atlas[0]
     unwrapped = Mesh(mesh.positions[vertex], mesh.normals[vertex], mesh.tangents[vertex], mesh.uvs[vertex],
