@@ -64,6 +64,26 @@ def test_linearised_frames_remove_the_distance_bias_of_the_codes(ar_recording):
     assert abs(ratios[1] - 1.0) < abs(ratios[0] - 1.0)
 
 
+def test_a_dark_frame_is_found_where_the_same_frame_well_exposed_is(ar_recording):
+    """A frame with the tag in view, its exposure cut to a sixteenth (through the camera's response, as the
+    auto-exposure's first frames are): the tag is found, at the corners of the well-exposed frame within
+    half a pixel (the linearised codes are raised by a constant gain, which moves no edge)."""
+    from arsim.capture.pipeline import read_frame
+    from arsim.evaluate.recording_plots import recording_camera, tag_in_view
+    from arsim.tracking.apriltag import TagTracker
+
+    rec, linear = ar_recording
+    table = rec.meta["table"]
+    tracker = TagTracker(recording_camera(rec), table["tag_size_m"], table["tag_id"], table["tag_family"], linear)
+    k = int(np.flatnonzero(tag_in_view(rec))[0])
+    frame = read_frame(rec.folder / rec.frames[k]["file"])
+    dark = np.searchsorted(linear, linear[frame] / 16).clip(0, 255).astype(np.uint8)
+    assert np.percentile(dark, 99) < 0.5 * np.percentile(frame, 99)
+    bright, dim = tracker.track(frame), tracker.track(dark)
+    assert bright.found and dim.found
+    assert np.abs(dim.corners - bright.corners).max() < 0.5
+
+
 def test_the_percentiles_are_infinite_when_many_visible_frames_are_lost_and_null_in_json():
     """Seven visible frames, two lost: the 95th percentile is a lost frame's error, infinite (interpolating
     between two infinite errors gave NaN), and metrics.json says null."""

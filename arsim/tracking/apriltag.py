@@ -55,6 +55,8 @@ class TagPose:
 
 LOST = TagPose(None, None, None)
 
+BRIGHT_GAIN_MAX = 64.0  # the most a dark frame's linear codes are raised (beyond it, noise would be)
+
 
 class TagTracker:
     """Finds one tag (family, id, side of its black square) in 8-bit frames and returns its pose."""
@@ -77,10 +79,7 @@ class TagTracker:
         # 130 ms on a 640 x 480 frame. The tag is found first without it (4 ms), then again with it on
         # the tag's surroundings only, which gives the corners the whole frame would.
         self.finder = cv2.aruco.ArucoDetector(dictionary, cv2.aruco.DetectorParameters())
-        self.linearise = None
-        if linear_of_code is not None:
-            linear = np.asarray(linear_of_code, dtype=np.float64)
-            self.linearise = np.clip(np.round(255 * linear / linear[-1]), 0, 255).astype(np.uint8)
+        self.linear = None if linear_of_code is None else np.asarray(linear_of_code, dtype=np.float64)
         self.detector = cv2.aruco.ArucoDetector(dictionary, parameters)
         self.camera, self.tag_id = camera, tag_id
         h = tag_size_m / 2
@@ -108,11 +107,21 @@ class TagTracker:
             return self._find(self.detector, grey)
         return refined + [x0, y0]
 
+    def linearise_table(self, grey: np.ndarray) -> np.ndarray:
+        """(256,) uint8: each code's linear exposure, scaled so that the frame's brightest percent of pixels
+        reach 255. A constant gain keeps the edges where the light puts them; without it, a dark frame (the
+        auto-exposure's first frames) left the tag's white at 20 of 255 in linear codes, too little contrast
+        for the detector's thresholds."""
+        histogram = cv2.calcHist([grey], [0], None, [256], [0, 256]).ravel()
+        bright = int(np.searchsorted(np.cumsum(histogram), 0.99 * grey.size))  # the 99th percentile's code
+        level = max(self.linear[bright], self.linear[-1] / BRIGHT_GAIN_MAX)
+        return np.clip(np.round(255 * self.linear / level), 0, 255).astype(np.uint8)
+
     def track(self, frame: np.ndarray) -> TagPose:
         """The tag's pose in an 8-bit RGB or grey frame, or LOST."""
         grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
-        if self.linearise is not None:
-            grey = cv2.LUT(grey, self.linearise)
+        if self.linear is not None:
+            grey = cv2.LUT(grey, self.linearise_table(grey))
         image_corners = self._corners(grey)
         if image_corners is None:
             return LOST
