@@ -12,6 +12,9 @@ Equirect (lat-long): W x H, W = 2H, row 0 = top.
     d = (sin theta sin phi, cos theta, -sin theta cos phi)
 The centre column looks along +z.
 
+Texture (the objects' normal, light and directional light maps): H x W, row 0 = top = v 1.
+    texel centre     u = (col + 0.5) / W,  v = (H - 1 - row + 0.5) / H
+
 Camera: OpenCV pinhole (x right, y down, z forward) everywhere but inside render/, which converts with
 the helpers at the end of this module. Rotations: scipy.spatial.transform.Rotation, quaternions (x, y, z, w).
 """
@@ -46,6 +49,7 @@ __all__ = [
     "gl_projection_from_intrinsics",
     "gl_view_from_opencv_pose",
     "normalize",
+    "texture_texel_uv",
     "yaw_rotation",
 ]
 
@@ -186,6 +190,12 @@ def equirect_texel_uv(height: int) -> np.ndarray:
     u = (np.arange(2 * height, dtype=np.float64) + 0.5) / (2 * height)
     v = (np.arange(height, dtype=np.float64) + 0.5) / height
     return np.stack(np.broadcast_arrays(u[None, :], v[:, None]), axis=-1)
+
+
+def texture_texel_uv(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """(u, v), each (H, W): the texture coordinates of an H x W texture's texel centres, row 0 at v = 1."""
+    v, u = np.meshgrid((height - 1 - np.arange(height) + 0.5) / height, (np.arange(width) + 0.5) / width, indexing="ij")
+    return u, v
 
 
 def equirect_directions(height: int) -> np.ndarray:

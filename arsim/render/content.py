@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 
-from arsim.core.conventions import normalize
+from arsim.core.conventions import normalize, texture_texel_uv
 from arsim.core.errors import ArsimError
 from arsim.core.resample import to_layout
 from arsim.lighting.bases import parse_basis
@@ -80,7 +80,7 @@ def torus_texels(major: float, minor: float, size: tuple[int, int]) -> tuple[np.
     """Points, normals and tangents (H, W, 3) of the torus at the centres of an H x W texture's texels,
     row 0 at v = 1 (the light map's and the normal map's parameterisation)."""
     h, w = size
-    v, u = np.meshgrid((h - 1 - np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    u, v = texture_texel_uv(h, w)
     return torus_surface(u, v, major, minor)
 
 
@@ -118,7 +118,7 @@ def ridges_normal_map(size: tuple[int, int] = (128, 256), ridges: tuple[int, int
     """A tangent-space normal map (H, W, 3) in [0, 1] (eq. 5.1) of a height field of crossed ridges
     h = depth sin(2 pi k u) sin(2 pi m v) / (2 pi k) (slopes up to `depth`), row 0 at v = 1."""
     h, w = size
-    v, u = np.meshgrid((h - 1 - np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    u, v = texture_texel_uv(h, w)
     k, m = ridges
     du = depth * np.cos(2 * np.pi * k * u) * np.sin(2 * np.pi * m * v)
     dv = depth * (m / k) * np.sin(2 * np.pi * k * u) * np.cos(2 * np.pi * m * v)
@@ -177,8 +177,7 @@ def disc(radius: float, rings: int = 16, segments: int = 96) -> Mesh:
 def disc_texels(radius: float, size: int, offset: np.ndarray) -> Surface:
     """The disc's light-map texels (size x size over its square, row 0 at v = 1, i.e. z = -radius); texels
     whose centre lies within a texel of the rim count, so that bilinear lookups at the rim have values."""
-    centre = (np.arange(size) + 0.5) / size
-    v, u = np.meshgrid(1.0 - centre, centre, indexing="ij")
+    u, v = texture_texel_uv(size, size)
     x, z = (2 * u - 1) * radius, -(2 * v - 1) * radius
     points = np.stack([x, np.zeros_like(x), z], axis=-1) + offset
     normals = np.broadcast_to([0.0, 1.0, 0.0], points.shape).copy()
@@ -251,7 +250,7 @@ def sphere_texels(radius: float, size: tuple[int, int], centre: np.ndarray) -> S
     """The light-map texels (H x W, row 0 at v = 1) of a sphere in uv_sphere's parameterisation (u the
     longitude / 2 pi, v = 1 - polar angle / pi), on the exact sphere, with uv_sphere's tangents."""
     h, w = size
-    v, u = np.meshgrid(1.0 - (np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    u, v = texture_texel_uv(h, w)
     theta, phi = np.pi * (1.0 - v), 2.0 * np.pi * u
     normals = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), np.sin(theta) * np.cos(phi)], axis=-1)
     tangents = np.stack([np.cos(phi), np.zeros_like(phi), -np.sin(phi)], axis=-1)

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from arsim.core.conventions import normalize
+from arsim.core.conventions import normalize, texture_texel_uv
 from arsim.core.errors import ArsimError
 from arsim.lighting.bases.lightmap import Surface
 from arsim.render.meshes import Mesh
@@ -86,7 +86,7 @@ def lightmap_texels(mesh: Mesh, model: np.ndarray, shape: tuple[int, int]) -> Su
     distance, (rows, cols) = ndimage.distance_transform_edt(~covered, return_indices=True)
     near = distance <= GUTTER * np.sqrt(2.0)
     h, w = shape
-    v, u = np.meshgrid(1.0 - (np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    u, v = texture_texel_uv(h, w)
     # Gutter texels are placed at their nearest covered texel's centre.
     u, v = np.where(covered, u, u[rows, cols]), np.where(covered, v, v[rows, cols])
     rows, cols = np.where(covered, np.arange(h)[:, None], rows), np.where(covered, np.arange(w), cols)

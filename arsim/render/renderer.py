@@ -72,6 +72,11 @@ class Material:
     volume_lit: bool = False  # to be lit through the scene's irradiance volume (content.light_objects bakes it)
 
 
+def box_corners(low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """(8, 3) the corners of the axis-aligned box low..high."""
+    return np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] for k in range(8)], dtype=np.float64)
+
+
 @dataclass(frozen=True)
 class Orbit:
     """How an object moves: round a circle on the table about where it stands, counter-clockwise seen
@@ -108,9 +113,8 @@ class SceneObject:
 
     def corners(self) -> np.ndarray:
         """(8, 3) the world corners of its mesh's bounding box (where it stands)."""
-        low, high = self.mesh.positions.min(axis=0), self.mesh.positions.max(axis=0)
-        box = np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
-        return (box @ self.model.T)[:, :3]
+        box = box_corners(self.mesh.positions.min(axis=0), self.mesh.positions.max(axis=0))
+        return (np.hstack([box, np.ones((8, 1))]) @ self.model.T)[:, :3]
 
     def swept_corners(self) -> np.ndarray:
         """(8, 3) the corners of a world box that holds it wherever its orbit takes it."""
@@ -118,8 +122,7 @@ class SceneObject:
         if self.orbit is None:
             return corners
         reach = np.array([self.orbit.radius, 0.0, self.orbit.radius])
-        low, high = corners.min(axis=0) - reach, corners.max(axis=0) + reach
-        return np.array([[(low, high)[(k >> a) & 1][a] for a in range(3)] for k in range(8)])
+        return box_corners(corners.min(axis=0) - reach, corners.max(axis=0) + reach)
 
 
 # Level of detail: the coarsest mesh whose departure from the surface stays under this many pixels on the

@@ -140,8 +140,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
     with atomic_path(out_dir / "session.mp4") as video_path:
         video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
         for n, k in enumerate(indices):
-            frame = read_frame(rec.folder / rec.frames[k]["file"])
-            pose, record = loop.run(frame, int(k), frame_time_s(rec, k))
+            frame, time_s = read_frame(rec.folder / rec.frames[k]["file"]), frame_time_s(rec, k)
+            pose, record = loop.run(frame, int(k), time_s)
             poses.append(pose)
             records.append(record)
             for name, ms in record.cpu_ms.items():
@@ -155,7 +155,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
             step_ms["readback"].append(1000 * (time.perf_counter() - start))
             if pose.found and (n % settings.flip_every == 0 or k in saved):
                 start = time.perf_counter()
-                true_light.render_objects(Rotation.from_matrix(pose.rotation), pose.translation, frame_time_s(rec, k))
+                true_light.render_objects(Rotation.from_matrix(pose.rotation), pose.translation, time_s)
                 true_light.background_pass(frame)
                 true_light.tonemap_pass(settings.key, settings.white, settings.log_average)
                 truth_frame = true_light.read_output()

@@ -79,10 +79,8 @@ class TagTracker:
         # 130 ms on a 640 x 480 frame. The tag is found first without it (4 ms), then again with it on
         # the tag's surroundings only, which gives the corners the whole frame would.
         self.finder = cv2.aruco.ArucoDetector(dictionary, cv2.aruco.DetectorParameters())
-        self.linear = self.linearise = None
-        if linear_of_code is not None:
-            self.linear = np.asarray(linear_of_code, dtype=np.float64)
-            self.linearise = np.clip(np.round(255 * self.linear / self.linear[-1]), 0, 255).astype(np.uint8)
+        self.linear = None if linear_of_code is None else np.asarray(linear_of_code, dtype=np.float64)
+        self.linearise = None if self.linear is None else self._codes(self.linear[-1])
         self.detector = cv2.aruco.ArucoDetector(dictionary, parameters)
         self.camera, self.tag_id = camera, tag_id
         h = tag_size_m / 2
@@ -119,8 +117,10 @@ class TagTracker:
         bright = int(np.searchsorted(np.cumsum(histogram), 0.99 * grey.size))  # the 99th percentile's code
         full = self.linear[-1]
         level = max(self.linear[bright] / 0.75, full / BRIGHT_GAIN_MAX)
-        if level >= full:
-            return None
+        return None if level >= full else self._codes(level)
+
+    def _codes(self, level: float) -> np.ndarray:
+        """(256,) uint8: each code's linear exposure in 8 bits, `level` at 255."""
         return np.clip(np.round(255 * self.linear / level), 0, 255).astype(np.uint8)
 
     def track(self, frame: np.ndarray) -> TagPose:
