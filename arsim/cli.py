@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from arsim import __version__
-from arsim.core.assets import assets_dir
+from arsim.core.assets import assets_dir, bundled_scenarios
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
 from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
@@ -66,6 +66,8 @@ def _fmt(v: float | None) -> str:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
+    if (args.file / "manifest.json").is_file():
+        return _run_info(args)
     if args.file.is_dir():
         return _recording_info(args)
     stats = image_stats(read_hdr(args.file))
@@ -83,6 +85,27 @@ def cmd_info(args: argparse.Namespace) -> int:
     ]
     for key, value in rows:
         print(f"{key:<12} {value}")
+    return 0
+
+
+def _run_info(args: argparse.Namespace) -> int:
+    from arsim.run.pipeline import check_run
+
+    manifest = check_run(args.file)
+    s = manifest["metrics"]["session"]
+    summary = {"run": str(args.file), "scenario": manifest["scenario"]["name"], "seed": manifest["seed"],
+               "files": len(manifest["files"]), "bytes": sum(f["bytes"] for f in manifest["files"]),
+               "seconds_per_stage": manifest["seconds_per_stage"], "frames_total": s["frames_total"],
+               "frames_lost": s["frames_lost"], "flip_mean": s["flip_mean"], "versions": manifest["versions"]}
+    if args.json:
+        print(json_text(summary), end="")
+        return 0
+    stages = ", ".join(f"{k} {v:.1f} s" for k, v in summary["seconds_per_stage"].items())
+    print(f"run {summary['run']}: scenario {summary['scenario']} (seed {summary['seed']}), complete: "
+          f"{summary['files']} files, {summary['bytes'] / 1e6:.1f} MB, as manifest.json lists them")
+    print(f"stages     {stages}")
+    print(f"session    {s['frames_total']} frames ({s['frames_lost']} with the tag lost), {_tracking_p95(s)}, "
+          "FLIP against the truth frame " + (f"{s['flip_mean']:.4f}" if s["flip_mean"] is not None else "not computed"))
     return 0
 
 
@@ -494,9 +517,8 @@ def cmd_bases_compare(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from arsim.evaluate.diff import frames_of, run_diff
+    from arsim.evaluate.diff import frames_of, run_diff, update_baseline
     from arsim.run.pipeline import run_scenario
-    from arsim.testing import update_baseline
 
     scenario = load_scenario(args.scenario)
     if args.update_baseline and args.baseline is None:
@@ -572,6 +594,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------------------------------
 
 
+SCENARIO_HELP = ("a scenario .toml, or a bundled scenario's name (" + ", ".join(bundled_scenarios())
+                 + "); default: the embedded default scenario")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="arsim",
@@ -583,8 +609,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     p = _command(sub, "info", "print size, layout, radiance range and bad-texel counts of an HDR image, "
-                 "or check a recording and summarise it", "arsim info assets/envmaps/sunrise.exr")
-    p.add_argument("file", type=Path, metavar="FILE", help="OpenEXR (.exr) or Radiance (.hdr) image, or a recording folder")
+                 "or check a recording or a run directory (every file its manifest lists) and summarise it",
+                 "arsim info assets/envmaps/sunrise.exr   (or: arsim info rec, arsim info run)")
+    p.add_argument("file", type=Path, metavar="FILE",
+                   help="OpenEXR (.exr) or Radiance (.hdr) image, a recording folder or a run directory")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(run=cmd_info)
 
@@ -657,7 +685,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _command(sub, "record", "synthesise the capture sweep of a scenario (frames, IMU streams, fused orientation, truth) and, "
                  "unless [ar] enabled = false, the AR path around the table and tag into DIR/ar",
                  "arsim record scenarios/indoor.toml -o rec")
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help="scenario .toml (default: the embedded default scenario)")
+    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="recording folder (created if missing)")
     p.set_defaults(run=cmd_record)
 
@@ -665,7 +693,7 @@ def build_parser() -> argparse.ArgumentParser:
                  "by feature alignment, and measure it against the truth (records the scenario's sweep first if given one)",
                  "arsim capture rec -o capture   (or: arsim capture scenarios/indoor.toml -o capture)")
     p.add_argument("source", type=Path, nargs="?", metavar="SCENARIO|RECORDING",
-                   help="a recording folder, or a scenario .toml to record first (default: the embedded default scenario)")
+                   help="a recording folder, or a scenario (.toml or a bundled name) to record first; default: the embedded default scenario")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--size", type=_map_size, metavar="N", help="N of the captured N x N angle map (default: [capture] capture_size, 512)")
     p.add_argument("--align-every", type=_positive("--align-every"), metavar="K",
@@ -675,7 +703,7 @@ def build_parser() -> argparse.ArgumentParser:
     def session_options(p: argparse.ArgumentParser, env_help: str) -> None:
         """What render and profile share: the scenario, the output folder, the light's file, the maps' size."""
         p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
-                       help="scenario .toml (default: the embedded default scenario)")
+                       help=SCENARIO_HELP)
         p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
         p.add_argument("--env", type=Path, metavar="PROBE.exr", help=env_help)
         p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
@@ -717,7 +745,7 @@ def build_parser() -> argparse.ArgumentParser:
                  "every method it names, run the AR session, evaluate every stage, and write the run directory with "
                  "manifest.json and report/index.html; --baseline compares the frames with a baseline's",
                  "arsim run -o run   (or: arsim run scenarios/indoor.toml -o run --baseline baselines/indoor)")
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help="scenario .toml (default: the embedded default scenario)")
+    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="run directory (created if missing)")
     p.add_argument("--recording", type=Path, metavar="REC", help="replay this recording (`arsim record`) instead of recording anew")
     p.add_argument("--baseline", type=Path, metavar="DIR", help="compare the run's frames with this baseline (a run directory)")
@@ -729,7 +757,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _command(sub, "batch", "run many scenarios end to end in parallel processes (or as tasks on a Ray cluster) and write "
                  "one summary of all their metrics and regressions (summary.md, summary.html, summary.json)",
                  "arsim batch scenarios/*.toml -o batch --workers 2   (or: ... --ray auto, --baselines baselines)")
-    p.add_argument("scenarios", type=Path, nargs="+", metavar="SCENARIO", help="scenario .toml files")
+    p.add_argument("scenarios", type=Path, nargs="+", metavar="SCENARIO", help="scenario .toml files, or bundled scenarios' names")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="batch folder: a run directory per scenario")
     p.add_argument("--workers", type=_positive("--workers"), default=1, metavar="N", help="runs at once on this machine (default 1)")
     p.add_argument("--ray", metavar="ADDRESS", help="run each scenario as a task on the Ray cluster at ADDRESS (host:port, or auto)")
@@ -751,7 +779,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help="scenario .toml (default: the embedded default scenario)")
+    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
     p.set_defaults(run=cmd_validate)
     return parser
 

@@ -1,5 +1,7 @@
 """Visual regression in a user's own test suite: assert that a run's frames match a baseline.
 
+A pytest plugin: pytest alone imports this module (arsim's commands never do, so they run without pytest).
+
 As a function::
 
     from arsim.testing import assert_frames_match
@@ -18,13 +20,12 @@ A failure names the frames over the threshold, by how much, and where their heat
 from __future__ import annotations
 
 import os
-import shutil
 from pathlib import Path
 
 import pytest
 
 from arsim.core.errors import ArsimError
-from arsim.evaluate.diff import DEFAULT_MAX_FLIP, DiffResult, frames_of, run_diff
+from arsim.evaluate.diff import DEFAULT_MAX_FLIP, DiffResult, run_diff, update_baseline
 
 
 def assert_frames_match(frames: str | os.PathLike, baseline: str | os.PathLike, max_flip: float = DEFAULT_MAX_FLIP,
@@ -40,20 +41,6 @@ def assert_frames_match(frames: str | os.PathLike, baseline: str | os.PathLike, 
         page = f"\ndiff page: {out / 'index.html'}" if out is not None else ""
         raise AssertionError(f"the frames of {frames} do not match the baseline {baseline}:\n{result.message()}{page}")
     return result
-
-
-def update_baseline(frames: str | os.PathLike, baseline: str | os.PathLike) -> Path:
-    """Make the frames the baseline: baseline/frames/ holds copies of them (replacing what was there)."""
-    found = frames_of(Path(frames))
-    target = Path(baseline) / "frames"
-    staging = Path(baseline) / ".frames.new"
-    shutil.rmtree(staging, ignore_errors=True)
-    staging.mkdir(parents=True)
-    for name, path in found.items():
-        shutil.copy2(path, staging / name)
-    shutil.rmtree(target, ignore_errors=True)
-    staging.rename(target)  # (the old baseline is replaced whole, never left half-written)
-    return target
 
 
 def pytest_addoption(parser) -> None:

@@ -10,10 +10,10 @@ SH term and map), and from it the time a whole bake would take.
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 
+from arsim.core.assets import assets_dir
 from arsim.core.gl import create_gl_context
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
@@ -30,7 +30,7 @@ def main() -> None:
     parser.add_argument("--maps", type=int, default=8, help="maps baked at once (default 8)")
     parser.add_argument("--sh-order", type=int, default=35)
     args = parser.parse_args()
-    env = to_layout(read_hdr(Path(__file__).resolve().parents[1] / "assets" / "envmaps" / "interior.exr"), "anglemap", args.size)
+    env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", args.size)
     exponents = EXPONENTS[:args.maps]
     ctx = create_gl_context()
     query = ctx.query(time=True)

@@ -12,10 +12,10 @@ cost; they are drawn at random.
 import argparse
 import dataclasses
 import time
-from pathlib import Path
 
 import numpy as np
 
+from arsim.core.assets import assets_dir
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.gl import create_gl_context
 from arsim.core.hdr_io import read_hdr
@@ -52,7 +52,7 @@ def main() -> None:
     args = parser.parse_args()
 
     scenario = Scenario()
-    env = to_layout(read_hdr(Path(__file__).resolve().parents[1] / "assets" / "envmaps" / "interior.exr"), "anglemap", 256)
+    env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", 256)
     torus = next(o for o in scene_objects(scenario.render) if o.material.normal_map is not None)
     exponents = [1.0, torus.material.exponent]
     maps = dict(zip(exponents, fast_maps(env, exponents)))

@@ -12,18 +12,17 @@ from pathlib import Path
 
 import numpy as np
 
+from arsim.core.assets import assets_dir
 from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.lighting.accurate import BLOCK, Tile, accurate_maps
 from arsim.lighting.methods import MapParameters, bake
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env", type=Path, default=ROOT / "assets" / "envmaps" / "courtyard.exr")
+    parser.add_argument("--env", type=Path, default=assets_dir() / "envmaps" / "courtyard.exr")
     parser.add_argument("--spec", default="1,2,10,20,40,80,160,320,1280")
     parser.add_argument("--sizes", default="128,256,512")
     parser.add_argument("--texels", type=int, default=256, help="output texels timed for accurate/bounds above 128²")

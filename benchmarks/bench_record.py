@@ -10,9 +10,9 @@ varies by a third with it), then the median.
 """
 
 import argparse
+import os
 import resource
 import statistics
-import os
 import subprocess
 import sys
 import tempfile

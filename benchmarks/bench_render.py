@@ -9,10 +9,10 @@ max over the frames where the tag is in view (the look-away windows, which draw 
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 
+from arsim.core.assets import assets_dir
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.gl import create_gl_context
 from arsim.core.hdr_io import read_hdr
@@ -32,7 +32,7 @@ def main() -> None:
     args = parser.parse_args()
 
     scenario = Scenario()
-    env = to_layout(read_hdr(Path(__file__).resolve().parents[1] / "assets" / "envmaps" / "interior.exr"), "anglemap", 256)
+    env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", 256)
     objects = scene_objects(scenario.render)
     exponents = sorted({1.0} | {o.material.exponent for o in objects})
     maps = dict(zip(exponents, fast_maps(env, exponents)))

@@ -4,14 +4,14 @@
 """
 
 import argparse
-from pathlib import Path
 
 from timing import best_of
 
+from arsim.core.assets import assets_dir
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import supersampling_factor, to_layout
 
-ASSET = Path(__file__).resolve().parents[1] / "assets" / "envmaps" / "city.exr"
+ASSET = assets_dir() / "envmaps" / "city.exr"
 
 
 def main() -> None:

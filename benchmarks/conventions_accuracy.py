@@ -3,14 +3,14 @@
     python benchmarks/conventions_accuracy.py
 """
 
-from pathlib import Path
 
 import numpy as np
 
+from arsim.core.assets import assets_dir
 from arsim.core.conventions import (
+    angle_between,
     anglemap_solid_angles,
     anglemap_st_to_direction,
-    angle_between,
     direction_to_anglemap_st,
     direction_to_equirect_uv,
     equirect_solid_angles,
@@ -19,7 +19,7 @@ from arsim.core.conventions import (
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 
-ENVMAPS = sorted((Path(__file__).resolve().parents[1] / "assets" / "envmaps").glob("*.exr"))
+ENVMAPS = sorted((assets_dir() / "envmaps").glob("*.exr"))
 
 
 def sphere_mean(image: np.ndarray) -> np.ndarray:

@@ -7,10 +7,10 @@ and against the map's largest everywhere).
 """
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
+from arsim.core.assets import assets_dir
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask
 from arsim.core.gl import create_gl_context
 from arsim.core.hdr_io import read_hdr
@@ -32,7 +32,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--size", type=int, default=64, help="N of the N x N probe and maps (default 64)")
     n = parser.parse_args().size
-    env = to_layout(read_hdr(Path(__file__).resolve().parents[1] / "assets" / "envmaps" / "interior.exr"), "anglemap", n)
+    env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", n)
     ctx = create_gl_context()
     print(f"{n}² maps, exponents {EXPONENTS}, largest relative error against NumPy:")
     for name, threshold in (("accurate", None), ("bounds 0.03", 0.03)):

@@ -10,13 +10,14 @@ import argparse
 import time
 from pathlib import Path
 
+from arsim.core.assets import assets_dir
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.evaluate.compare_bases import parse_entries
 from arsim.evaluate.inm_compare import compare_on_torus, comparison_strip, scores
 from arsim.lighting.bases import get_basis
 
-ASSETS = Path(__file__).resolve().parents[1] / "assets" / "envmaps"
+ASSETS = assets_dir() / "envmaps"
 
 
 def main() -> None:

@@ -4,7 +4,9 @@ import numpy as np
 import OpenEXR
 import pytest
 
-ASSETS = Path(__file__).resolve().parents[1] / "assets"
+from arsim.core.assets import assets_dir
+
+ASSETS = assets_dir()
 ENVMAPS = sorted((ASSETS / "envmaps").glob("*.exr"))
 
 

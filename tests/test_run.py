@@ -192,3 +192,23 @@ def test_bad_inputs_are_refused_in_one_line(tmp_path, runs):
     assert_one_line_error(arsim("diff", tmp_path / "small.png", tmp_path / "nothing.png"), "no such file")
     assert_one_line_error(arsim("run", runs / "s.toml", "-o", tmp_path / "o", "--recording", tmp_path / "nothing"),
                           "no such recording")
+
+
+def test_info_checks_a_run_against_its_manifest(runs, tmp_path):
+    import shutil
+
+    r = arsim("info", runs / "a")
+    assert r.returncode == 0 and "scenario small (seed 7), complete:" in r.stdout, r.stdout + r.stderr
+    summary = json.loads(arsim("info", runs / "replay", "--json").stdout)
+    assert summary["files"] > 10 and "recording" not in summary["seconds_per_stage"]  # a replay records nothing
+    broken = tmp_path / "broken"
+    shutil.copytree(runs / "a", broken)
+    (broken / "session.mp4").unlink()
+    assert_one_line_error(arsim("info", broken), "session.mp4 is missing")
+    shutil.copy2(runs / "a" / "session.mp4", broken / "session.mp4")
+    assert arsim("info", broken).returncode == 0
+    with open(broken / "report" / "index.html", "a") as page:
+        page.write("<!-- edited -->")
+    assert_one_line_error(arsim("info", broken), "report/index.html has", "changed since the run")
+    (broken / "manifest.json").write_text("{")
+    assert_one_line_error(arsim("info", broken), "not a manifest arsim wrote")

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from arsim.core.assets import scenarios_dir
 from arsim.scenario import EnvironmentSection, Scenario, ScenarioError, load_scenario, scenario_to_toml
 from arsim.scenario.loader import parse_scenario
 from arsim.scenario.schema import PathResolver, parse_section, setting, subsection
@@ -134,7 +135,7 @@ def test_parse_scenario_from_text_uses_the_assets_for_relative_paths():
     assert s.environment.map == (ASSETS / "envmaps" / "sunrise.exr").resolve()
 
 
-@pytest.mark.parametrize("path", sorted((ASSETS.parent / "scenarios").glob("*.toml")), ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", sorted(scenarios_dir().glob("*.toml")), ids=lambda p: p.stem)
 def test_shipped_scenarios_are_valid(path):
     s = load_scenario(path)
     assert s.environment.map.exists()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import html
 import math
 import os
+import shutil
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -216,3 +217,17 @@ mean FLIP over {result.max_flip:g}; {sum(f.differing_pixels > 0 for f in result.
 <h2>Every frame</h2><table><tr><th>frame</th><th>FLIP mean</th><th>FLIP p99</th><th>PSNR (dB)</th><th>max |a-b|</th><th>pixels differing</th></tr>
 {''.join(rows)}</table></body></html>
 """
+
+
+def update_baseline(frames: str | os.PathLike, baseline: str | os.PathLike) -> Path:
+    """Make the frames the baseline: baseline/frames/ holds copies of them (replacing what was there)."""
+    found = frames_of(Path(frames))
+    target = Path(baseline) / "frames"
+    staging = Path(baseline) / ".frames.new"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir(parents=True)
+    for name, path in found.items():
+        shutil.copy2(path, staging / name)
+    shutil.rmtree(target, ignore_errors=True)
+    staging.rename(target)  # (the old baseline is replaced whole, never left half-written)
+    return target

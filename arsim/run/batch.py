@@ -24,6 +24,7 @@ from pathlib import Path
 
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
+from arsim.scenario.loader import scenario_path
 
 # (key in the run's metrics, column title, digits)
 COLUMNS = (
@@ -119,6 +120,7 @@ def _run_ray(jobs: list[tuple], address: str, done: Callable[[dict], None]) -> l
 def run_batch(scenarios: list[Path], out: Path, workers: int = 1, ray_address: str | None = None,
               baselines: Path | None = None, max_flip: float = 0.0, done: Callable[[dict], None] = lambda r: None) -> dict:
     """Run every scenario into out/<name>, then write the summary; returns it."""
+    scenarios = [scenario_path(s) for s in scenarios]  # bundled names to their files
     names = [s.stem for s in scenarios]
     if len(set(names)) != len(names):
         raise ArsimError("two scenarios have the same file name; their runs would share a folder: rename one")

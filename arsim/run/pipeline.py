@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import platform
 import time
 from collections.abc import Callable, Iterator
@@ -181,4 +182,39 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         "files": _files_under(out, FILE_ROLES),
     }
     write_text_atomic(out / "manifest.json", json_text(manifest))
+    return manifest
+
+
+def check_run(out: Path) -> dict:
+    """A run directory checked against its manifest: every stage ran and every file listed is there with the
+    size it had (a run cut short, moved without some of its files or edited since fails). Returns the
+    manifest; raises ArsimError naming the first thing wrong."""
+    path = out / "manifest.json"
+    if not path.is_file():
+        raise ArsimError(f"{out}: no manifest.json; not a finished run directory (make one with `arsim run -o DIR`)")
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+        files, seconds, metrics = manifest["files"], manifest["seconds_per_stage"], manifest["metrics"]
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
+        raise ArsimError(f"{path}: not a manifest arsim wrote ({type(exc).__name__}: {exc}); run the scenario again") from None
+    # a replayed recording (`--recording`) is not recorded again
+    expected = [s for s in STAGES if s != "recording" or manifest.get("recording") == "recording"]
+    missing_stages = [s for s in expected if s not in seconds]
+    if missing_stages:
+        raise ArsimError(f"{path}: the stage {missing_stages[0]} never finished; run the scenario again")
+    missing_metrics = [k for k in ("capture", "maps", "session") if not metrics.get(k)]
+    if missing_metrics:
+        raise ArsimError(f"{path}: no {missing_metrics[0]} metrics; run the scenario again")
+    listed = {f["path"] for f in files}
+    for required in ("scenario.toml", "metrics.json", "capture/env.exr", "session.mp4", "report/index.html"):
+        if required not in listed:
+            raise ArsimError(f"{path}: lists no {required}; run the scenario again")
+    for f in files:
+        p = out / f["path"]
+        if not p.is_file():
+            raise ArsimError(f"{out}: {f['path']} is missing ({len(files)} files listed in manifest.json); "
+                             "copy the whole run directory, or run the scenario again")
+        if p.stat().st_size != f["bytes"]:
+            raise ArsimError(f"{out}: {f['path']} has {p.stat().st_size} bytes, manifest.json says {f['bytes']}: "
+                             "changed since the run; run the scenario again")
     return manifest

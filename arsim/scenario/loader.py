@@ -9,11 +9,11 @@ from pathlib import Path
 
 import tomli_w
 
-from arsim.core.assets import assets_dir
+from arsim.core.assets import assets_dir, bundled_scenarios
 from arsim.scenario.schema import PathResolver, ScenarioError, parse_section, section_to_dict
 from arsim.scenario.sections import Scenario
 
-__all__ = ["DEFAULT_SCENARIO", "load_scenario", "parse_scenario", "scenario_to_toml"]
+__all__ = ["DEFAULT_SCENARIO", "load_scenario", "parse_scenario", "scenario_path", "scenario_to_toml"]
 
 # Shown in messages and manifests where the embedded default scenario is meant.
 DEFAULT_SCENARIO = "<default scenario>"
@@ -32,13 +32,25 @@ def parse_scenario(text: str, source: str = DEFAULT_SCENARIO, scenario_dir: Path
     return parse_section(Scenario, table, source, PathResolver(scenario_dir, assets_dir()))
 
 
+def scenario_path(path: str | os.PathLike) -> Path:
+    """The scenario file that path names: the path itself, or where no such file exists and path is a bare
+    name (no folder, no suffix), the bundled scenario of that name (`arsim run indoor`)."""
+    path = Path(path)
+    if path.exists() or path.suffix or len(path.parts) != 1:
+        return path
+    return bundled_scenarios().get(path.name, path)
+
+
 def load_scenario(path: str | os.PathLike | None = None) -> Scenario:
-    """The scenario in the TOML file at path, or the embedded default when path is None."""
+    """The scenario in the TOML file at path (or a bundled scenario's name), or the embedded default when
+    path is None."""
     if path is None:
         return parse_scenario(_default_text())
-    path = Path(path)
+    path = scenario_path(path)
     if not path.exists():
-        raise ScenarioError(f"{path}: no such scenario file; check the path (or leave it out to use the default scenario)")
+        names = ", ".join(bundled_scenarios())
+        raise ScenarioError(f"{path}: no such scenario file; check the path, name a bundled scenario ({names}) "
+                            "or leave it out to use the default scenario")
     if not path.is_file():
         raise ScenarioError(f"{path}: is not a file; give a scenario .toml file")
     try:
