@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from arsim.capture.accumulate import ProbeAccumulator
 from arsim.capture.align import Aligner
+from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
 from arsim.capture.response import RecoveredResponse, calibrate_response
 from arsim.core.errors import ArsimError
 from arsim.evaluate.recording_plots import frame_camera_orientations, recording_camera
@@ -34,13 +35,14 @@ class CaptureSettings:
     size: int = 512  # N of the captured N x N angle map
     align_every: int = 1  # metered frames between alignments (0: never align)
     correction_gain: float = 0.5  # fraction of a measured correction applied at once (smooth; 1 = all)
+    refine: bool = False  # the global rotation refinement after the online pass (README: HDR capture)
 
     @classmethod
     def of(cls, scenario: Scenario, size: int | None = None, align_every: int | None = None) -> CaptureSettings:
         """The scenario's [capture] settings, with the command line's overrides where given."""
         c = scenario.capture
         return cls(c.capture_size if size is None else size, c.align_every if align_every is None else align_every,
-                   c.correction_gain)
+                   c.correction_gain, c.refine)
 
 
 class DriftCorrection:
@@ -65,9 +67,12 @@ class CaptureResult:
     t_s: np.ndarray  # frame times (K,)
     truth: Rotation  # true camera-to-world per frame
     uncorrected: Rotation  # what the IMU's fused orientation says
-    corrected: Rotation  # with the feature-based correction
-    aligned: np.ndarray  # (K,) bool: an alignment succeeded at this frame
+    corrected: Rotation  # what the probe was accumulated with: refined, or the online pass's without refinement
+    online: Rotation  # the online pass's (aligned against the probe so far, frame by frame)
+    aligned: np.ndarray  # (K,) bool: an online alignment succeeded at this frame
     seconds: float  # processing time (reading frames included)
+    seconds_online: float  # of which the online pass
+    refinement: Refinement | None = None
 
     @property
     def frames_per_second(self) -> float:
@@ -125,13 +130,18 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     times, last_aligned_t = np.array([f["t_ns"] for f in rec.frames]) / 1e9, 0.0
     start = time.perf_counter()
     any_unclipped = False
+    features = KeyframeFeatures(camera)
+    metered_small: dict[int, np.ndarray] = {}  # what the refinement's keyframes are taken from
+    files = [rec.folder / f["file"] for f in rec.frames]
+    scales = [f["exposure_ns"] / 1e9 * f["iso"] / sensor.base_iso * sensor.sensitivity for f in rec.frames]
     with ThreadPoolExecutor(2) as readers:  # PNG decoding releases the GIL: read ahead
-        frames = readers.map(read_frame, [rec.folder / f["file"] for f in rec.frames])
-        for k, (info, codes) in enumerate(zip(rec.frames, frames)):
+        for k, (info, codes) in enumerate(zip(rec.frames, readers.map(read_frame, files))):
             any_unclipped |= bool(np.any(codes < 255))
-            exposure_scale = info["exposure_ns"] / 1e9 * info["iso"] / sensor.base_iso * sensor.sensitivity
+            exposure_scale = scales[k]
             predicted = correction.rotation * uncorrected[k]
             metered, index = divmod(k, len(bracket))
+            if index == 0 and settings.refine:
+                metered_small[k] = features.small(codes)
             # Only metered frames are aligned: the bracketed ones are dark but for the highlights.
             if settings.align_every and index == 0 and metered % settings.align_every == 0 and k > 0:
                 found = aligner.align(codes, accumulator, predicted.as_matrix(), exposure_scale)
@@ -147,8 +157,24 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
             accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale**2,
                             exposure_levels.index(bracket[index]))
             if k % 30 == 0 or k == len(rec.frames) - 1:
-                progress((k + 1) / len(rec.frames), accumulator.coverage())
+                progress((k + 1) / len(rec.frames) * (0.6 if settings.refine else 1.0), accumulator.coverage())
     if not any_unclipped:
         raise ArsimError(f"{rec.folder}: every frame is saturated (all codes 255); nothing can be captured from it")
-    return CaptureResult(accumulator, response, times, truth, uncorrected,
-                         Rotation.concatenate(corrected), aligned, time.perf_counter() - start)
+    online = Rotation.concatenate(corrected)
+    seconds_online = time.perf_counter() - start
+    if not settings.refine or not settings.align_every:
+        return CaptureResult(accumulator, response, times, truth, uncorrected, online, online, aligned,
+                             seconds_online, seconds_online)
+    # The refined pass: every keyframe orientation at once, then the frames accumulated again with them.
+    refinement = refine(times, np.array(sorted(metered_small)), uncorrected, online, metered_small.__getitem__,
+                        scenario.device.camera.hfov_deg, camera, GyroNoise.of(scenario.device.gyroscope),
+                        scenario.run.seed)
+    accumulator = ProbeAccumulator(settings.size, camera, falloff, levels=len(exposure_levels))
+    with ThreadPoolExecutor(2) as readers:
+        for k, codes in enumerate(readers.map(read_frame, files)):
+            accumulator.add(codes, response.linear / scales[k], refinement.orientations[k].as_matrix(), scales[k]**2,
+                            exposure_levels.index(bracket[k % len(bracket)]))
+            if k % 30 == 0 or k == len(rec.frames) - 1:
+                progress(0.6 + 0.4 * (k + 1) / len(rec.frames), accumulator.coverage())
+    return CaptureResult(accumulator, response, times, truth, uncorrected, refinement.orientations, online, aligned,
+                         time.perf_counter() - start, seconds_online, refinement)

@@ -57,6 +57,7 @@ def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_erro
     map_err = [map_error(maps_truth[k][inside], maps_probe[k][inside]) for k in range(len(MAP_EXPONENTS))]
     corrected = orientation_errors_deg(result.corrected, result.truth)
     uncorrected = orientation_errors_deg(result.uncorrected, result.truth)
+    online = orientation_errors_deg(result.online, result.truth)
     omega = anglemap_solid_angles(n)
     luminance_truth, luminance_probe = truth @ LUMA, complete @ LUMA
     core = (luminance_truth >= BRIGHTEST_FRACTION * luminance_truth[inside].max()).astype(np.uint8)
@@ -72,7 +73,13 @@ def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_erro
         "orientation_max_deg_corrected": float(corrected.max()),
         "orientation_rms_deg_uncorrected": float(np.sqrt(np.mean(uncorrected**2))),
         "orientation_max_deg_uncorrected": float(uncorrected.max()),
+        "orientation_rms_deg_online": float(np.sqrt(np.mean(online**2))),
         "alignments_succeeded": int(result.aligned.sum()),
+        "refined": result.refinement is not None,
+        "keyframes": 0 if result.refinement is None else len(result.refinement.keyframes),
+        "loop_closures": 0 if result.refinement is None else result.refinement.loop_closures,
+        "seconds_online": result.seconds_online,
+        "seconds_refinement": result.seconds - result.seconds_online,
         "radiance_median_abs_rel_err_pct": float(100 * np.median(rel)),
         "radiance_mean_abs_rel_err_pct": float(100 * rel.mean()),
         "irradiance_mean_err_pct": map_err[0].mean_percent,
@@ -101,7 +108,11 @@ def plot_drift(result: CaptureResult, path: Path) -> Path:
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(9, 3.5))
     ax.plot(result.t_s, orientation_errors_deg(result.uncorrected, result.truth), label="IMU only (uncorrected)")
-    ax.plot(result.t_s, orientation_errors_deg(result.corrected, result.truth), label="with feature alignment")
+    if result.refinement is not None:
+        ax.plot(result.t_s, orientation_errors_deg(result.online, result.truth), label="online alignment", alpha=0.7)
+        ax.plot(result.t_s, orientation_errors_deg(result.corrected, result.truth), label="refined (what the probe holds)")
+    else:
+        ax.plot(result.t_s, orientation_errors_deg(result.corrected, result.truth), label="with feature alignment")
     ax.scatter(result.t_s[result.aligned], np.zeros(result.aligned.sum()), s=2, color="tab:green", label="alignment succeeded")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("camera orientation error (degrees)")

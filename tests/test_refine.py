@@ -1,0 +1,64 @@
+"""The global rotation refinement's solver and interpolation, on constraints with known answers."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from arsim.capture.refine import GyroNoise, interpolate, solve
+
+
+def _spiral(m: int) -> Rotation:
+    """Keyframe orientations along a sweep: yaw turning, pitch rising."""
+    t = np.linspace(0.0, 1.0, m)
+    return Rotation.from_euler("YX", np.stack([np.radians(5 * 360 * t), np.radians(-60 + 120 * t)], axis=1))
+
+
+def _constraints(truth: Rotation, loop: int, sigma: float = np.radians(0.05)):
+    m = len(truth)
+    chain = [(i, i + 1, truth[i].inv() * truth[i + 1], sigma) for i in range(m - 1)]
+    closures = [(i, i + loop, truth[i].inv() * truth[i + loop], sigma) for i in range(m - loop)]
+    return chain + closures
+
+
+def test_solve_removes_an_injected_drift():
+    truth = _spiral(120)
+    drift = Rotation.from_rotvec(np.outer(np.linspace(0, 1, 120), np.radians([0.5, 3.0, -1.0])))  # 3.2 degrees at the end
+    start = drift * truth
+    refined, before, after = solve(start, _constraints(truth, 24))
+    assert np.degrees((refined.inv() * truth).magnitude()).max() < 1e-6 and after < 1e-9 * before
+
+
+def test_a_false_loop_closure_costs_little():
+    truth = _spiral(120)
+    constraints = _constraints(truth, 24)
+    constraints[130] = (constraints[130][0], constraints[130][1],
+                        constraints[130][2] * Rotation.from_rotvec(np.radians([0, 10.0, 0])), constraints[130][3])
+    start = Rotation.from_rotvec(np.outer(np.linspace(0, 1, 120), np.radians([0, 2.0, 0]))) * truth
+    refined, _, _ = solve(start, constraints)
+    assert np.degrees((refined.inv() * truth).magnitude()).max() < 0.05
+    # (a plain least squares would spread the 10 degrees over the loop)
+    exact = [c for k, c in enumerate(constraints) if k != 130]
+    assert np.degrees((solve(start, exact)[0].inv() * truth).magnitude()).max() < 1e-6
+
+
+def test_priors_hold_keyframes_without_constraints():
+    truth = _spiral(20)
+    start = Rotation.from_rotvec(np.outer(np.linspace(0, 1, 20), np.radians([0, 1.0, 0]))) * truth
+    # only a chain over the first half: the second half is held by its priors alone
+    constraints = [(i, i + 1, truth[i].inv() * truth[i + 1], np.radians(0.05)) for i in range(9)]
+    refined, _, _ = solve(start, constraints, truth, np.full(20, np.radians(0.3)))
+    assert np.degrees((refined.inv() * truth).magnitude()).max() < 1e-4
+
+
+def test_interpolation_carries_the_correction_between_keyframes():
+    times = np.linspace(0.0, 2.0, 21)
+    imu = Rotation.from_euler("Y", np.radians(40 * times)[:, None])
+    keys = np.array([0, 10, 20])
+    corrections = Rotation.from_rotvec(np.radians([[0, 0, 0], [0, 1.0, 0], [0, 2.0, 0]]))
+    frames = interpolate(times, keys, corrections * imu[keys], imu)
+    assert np.allclose(np.degrees((frames * imu.inv()).as_rotvec()[:, 1]), np.linspace(0, 2.0, 21), atol=1e-9)
+
+
+def test_gyro_noise_grows_with_time_and_turn():
+    g = GyroNoise(noise_density=5e-5, bias=1e-3, scale_factor=5e-3)
+    assert g.sigma(0.1, 0.1) < g.sigma(0.2, 0.1) < g.sigma(0.2, 0.5)
+    assert abs(g.sigma(1.0, 0.0) - np.sqrt(5e-5**2 + 1e-3**2 + np.radians(0.01) ** 2)) < 1e-12
