@@ -212,3 +212,14 @@ def test_info_checks_a_run_against_its_manifest(runs, tmp_path):
     assert_one_line_error(arsim("info", broken), "report/index.html has", "changed since the run")
     (broken / "manifest.json").write_text("{")
     assert_one_line_error(arsim("info", broken), "not a manifest arsim wrote")
+
+
+def test_the_manifest_does_not_list_itself(tmp_path):
+    """A run into a folder holding an earlier run's manifest.json lists the files, not that manifest."""
+    from arsim.run.pipeline import FILE_ROLES, _files_under
+
+    (tmp_path / "capture").mkdir()
+    (tmp_path / "capture" / "env.exr").write_bytes(b"x" * 10)
+    (tmp_path / "manifest.json").write_text("{}")
+    assert _files_under(tmp_path, FILE_ROLES) == [{"path": "capture/env.exr", "role": FILE_ROLES["capture/env.exr"],
+                                                   "bytes": 10}]

@@ -38,10 +38,13 @@ def quiet_stage(description: str) -> Iterator[Callable[..., None]]:
 
 
 def _files_under(out: Path, roles: dict[str, str]) -> list[dict]:
-    """Every file of the run with its role: the first folder (or file name) it lies under names it."""
+    """Every file of the run with its role: the first folder (or file name) it lies under names it. Not the
+    manifest itself (a run into a folder that holds an earlier run's would list the old one's size)."""
     files = []
     for path in sorted(p for p in out.rglob("*") if p.is_file() and not p.name.startswith(".")):
         rel = path.relative_to(out).as_posix()
+        if rel == "manifest.json":
+            continue
         role = next((r for prefix, r in roles.items() if rel == prefix or rel.startswith(prefix + "/")), "other")
         files.append({"path": rel, "role": role, "bytes": path.stat().st_size})
     return files
@@ -210,6 +213,8 @@ def check_run(out: Path) -> dict:
         if required not in listed:
             raise ArsimError(f"{path}: lists no {required}; run the scenario again")
     for f in files:
+        if f["path"] == "manifest.json":  # (listed by runs into a folder that held an earlier run's)
+            continue
         p = out / f["path"]
         if not p.is_file():
             raise ArsimError(f"{out}: {f['path']} is missing ({len(files)} files listed in manifest.json); "
