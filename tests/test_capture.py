@@ -136,7 +136,7 @@ def test_a_source_clipped_at_every_exposure_is_reported():
     probe, _ = lamp_scene()
     acc = swept_lamp(levels=1, bracket_ev=(0.0,), error_deg=0.0)
     still = Rotation.identity(80)
-    result = CaptureResult(acc, ideal_response(), np.arange(80) / 30, still, still, still, np.zeros(80, bool), 1.0)
+    result = CaptureResult(acc, ideal_response(), np.arange(80) / 30, still, still, still, still, np.zeros(80, bool), 1.0, 1.0)
     metrics, _ = capture_metrics(result, probe, {"median_pct": 0.0, "max_pct": 0.0})
     assert metrics["brightest_source_clipped_pct"] > 10 and metrics["brightest_source_ratio"] < 0.1
     assert "lower bound" in brightest_warning(metrics)
