@@ -23,7 +23,7 @@ def test_solve_removes_an_injected_drift():
     truth = _spiral(120)
     drift = Rotation.from_rotvec(np.outer(np.linspace(0, 1, 120), np.radians([0.5, 3.0, -1.0])))  # 3.2 degrees at the end
     start = drift * truth
-    refined, before, after = solve(start, _constraints(truth, 24))
+    refined, before, after, _ = solve(start, _constraints(truth, 24))
     assert np.degrees((refined.inv() * truth).magnitude()).max() < 1e-6 and after < 1e-9 * before
 
 
@@ -33,7 +33,7 @@ def test_a_false_loop_closure_costs_little():
     constraints[130] = (constraints[130][0], constraints[130][1],
                         constraints[130][2] * Rotation.from_rotvec(np.radians([0, 10.0, 0])), constraints[130][3])
     start = Rotation.from_rotvec(np.outer(np.linspace(0, 1, 120), np.radians([0, 2.0, 0]))) * truth
-    refined, _, _ = solve(start, constraints)
+    refined, _, _, _ = solve(start, constraints)
     assert np.degrees((refined.inv() * truth).magnitude()).max() < 0.05
     # (a plain least squares would spread the 10 degrees over the loop)
     exact = [c for k, c in enumerate(constraints) if k != 130]
@@ -45,7 +45,7 @@ def test_priors_hold_keyframes_without_constraints():
     start = Rotation.from_rotvec(np.outer(np.linspace(0, 1, 20), np.radians([0, 1.0, 0]))) * truth
     # only a chain over the first half: the second half is held by its priors alone
     constraints = [(i, i + 1, truth[i].inv() * truth[i + 1], np.radians(0.05)) for i in range(9)]
-    refined, _, _ = solve(start, constraints, truth, np.full(20, np.radians(0.3)))
+    refined, _, _, _ = solve(start, constraints, truth, np.full(20, np.radians(0.3)))
     assert np.degrees((refined.inv() * truth).magnitude()).max() < 1e-4
 
 

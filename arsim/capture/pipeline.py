@@ -35,7 +35,7 @@ class CaptureSettings:
     size: int = 512  # N of the captured N x N angle map
     align_every: int = 1  # metered frames between alignments (0: never align)
     correction_gain: float = 0.5  # fraction of a measured correction applied at once (smooth; 1 = all)
-    refine: bool = False  # the global rotation refinement after the online pass (README: HDR capture)
+    refine: bool = True  # the global rotation refinement after the online pass (README: HDR capture)
 
     @classmethod
     def of(cls, scenario: Scenario, size: int | None = None, align_every: int | None = None) -> CaptureSettings:
@@ -166,9 +166,11 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
         return CaptureResult(accumulator, response, times, truth, uncorrected, online, online, aligned,
                              seconds_online, seconds_online)
     # The refined pass: every keyframe orientation at once, then the frames accumulated again with them.
+    gyro = rec.imu["gyroscope"]
     refinement = refine(times, np.array(sorted(metered_small)), uncorrected, online, metered_small.__getitem__,
                         scenario.device.camera.hfov_deg, camera, GyroNoise.of(scenario.device.gyroscope),
-                        scenario.run.seed)
+                        scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))),
+                        aligned)
     accumulator = ProbeAccumulator(settings.size, camera, falloff, levels=len(exposure_levels))
     with ThreadPoolExecutor(2) as readers:
         for k, codes in enumerate(readers.map(read_frame, files)):

@@ -22,7 +22,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation, Slerp
 
-from arsim.capture.align import INLIER_DEG, MIN_INLIERS, robust_rotation, scaled_camera
+from arsim.capture.align import MIN_INLIERS, robust_rotation, scaled_camera
 from arsim.core.conventions import CameraIntrinsics
 
 KEY_DEG = 5.0  # a metered frame becomes a keyframe once the view has turned this far from the last one
@@ -31,8 +31,11 @@ MAX_PAIRS = 6  # per keyframe, the nearest in angle taken close in time, and as 
 LOOP_S = 3.0  # keyframes taken further apart than this in time are loop-closure candidates
 MIN_PAIR_INLIERS = 12  # a loop closure needs this many agreeing matches
 PAIR_FLOOR_DEG = 0.05  # a pair's rotation is known no better than this (measured: 0.05-0.08 degrees median error)
-PAIR_GATE_DEG = 1.0  # a pair disagreeing with the online pass's relative rotation by more is a false match
-ONLINE_SIGMA_DEG = 0.3  # the online pass's orientations, as priors (its RMS error on the default sweep)
+PAIR_GATE_DEG = 1.0  # a pair disagreeing with the estimate's relative rotation by more (and the gyroscope's
+# possible drift between the two) is a false match
+PRIOR_REACH_S = 1.0  # the online orientations are priors within this of an online alignment that succeeded
+ROUNDS = 2
+ONLINE_SIGMA_DEG = 3.0  # the online pass's orientations, as weak priors (0.3: 0.25 deg RMS on the default sweep, 1: 0.23, 3: 0.23)
 LOSS_SCALE = 3.0  # residuals (in standard deviations) beyond which the Cauchy loss stops trusting a constraint
 
 
@@ -49,11 +52,71 @@ class GyroNoise:
         """From a scenario's [device.gyroscope] section."""
         return cls(gyroscope.noise_density, gyroscope.turn_on_bias + gyroscope.bias_instability, gyroscope.scale_factor)
 
-    def sigma(self, dt: float, angle: float) -> float:
+    def sigma(self, dt: float, angle: float, calibrated: bool = False) -> float:
         """Standard deviation (rad, per axis) of the integrated relative rotation over dt seconds in which the
-        device turned by angle radians."""
-        return float(np.sqrt(self.noise_density**2 * dt + (self.bias * dt) ** 2 + (self.scale_factor * angle) ** 2
-                             + np.radians(0.01) ** 2))  # (a floor: the fusion's own interpolation)
+        device turned by angle radians; calibrated: with the scale factors and the bias estimated (the
+        noise and a tenth of the bias left)."""
+        bias, scale = (0.1 * self.bias, 0.0) if calibrated else (self.bias, self.scale_factor)
+        return float(np.sqrt(self.noise_density**2 * dt + (bias * dt) ** 2 + (scale * angle) ** 2
+                             + np.radians(0.01) ** 2))  # (a floor: the interpolation between samples)
+
+
+def _prefix_products(steps: Rotation) -> Rotation:
+    """C_k = s_0 s_1 ... s_k for every k: a Hillis-Steele scan (log2 K vectorised products; rotations
+    compose associatively, the earlier prefix on the left)."""
+    q = steps
+    shift = 1
+    while shift < len(q):
+        q = Rotation.concatenate([q[:shift], q[:-shift] * q[shift:]])
+        shift *= 2
+    return q
+
+
+def integrated_gyroscope(t_ns: np.ndarray, omega: np.ndarray, times_s: np.ndarray) -> Rotation:
+    """The device's rotation since the stream's start at each of times_s, the raw gyroscope (rad/s, device
+    axes) integrated sample by sample (each reading held over the interval it ends, as the fusion does),
+    slerped between samples. No accelerometer in it: the fused orientation's gravity corrections are
+    pulled by the device's sway."""
+    dt = np.diff(t_ns.astype(np.float64), prepend=float(t_ns[0])) * 1e-9
+    cumulative = _prefix_products(Rotation.from_rotvec(omega * dt[:, None]))
+    t = np.clip(times_s * 1e9, float(t_ns[0]), float(t_ns[-1]))
+    return Slerp(t_ns.astype(np.float64), cumulative)(t)
+
+
+CALIBRATION = 12  # the gyroscope's corrections the refinement estimates: omega' = (I + D) omega - b, D 3x3, b (3,)
+_STEP = 1e-5  # the finite difference of the relative rotations' Jacobians in them
+
+
+@dataclass
+class GyroIntervals:
+    """The raw gyroscope's relative rotations of the camera between consecutive keyframes, and how they
+    change with the calibration (linear: D and b are thousandths)."""
+
+    rotations: Rotation  # (M-1,) Q_i = C(t_i)⁻¹ C(t_i+1), camera axes
+    jacobians: np.ndarray  # (M-1, 3, CALIBRATION): d rotvec(Q_i⁻¹ Q_i(theta)) / d theta
+
+    @classmethod
+    def of(cls, t_ns: np.ndarray, omega: np.ndarray, key_times_s: np.ndarray, mount: Rotation) -> GyroIntervals:
+        def relative(w):
+            turns = mount.inv() * integrated_gyroscope(t_ns, w, key_times_s) * mount
+            return turns[:-1].inv() * turns[1:]
+
+        base = relative(omega)
+        jacobians = np.empty((len(base), 3, CALIBRATION))
+        for p in range(CALIBRATION):
+            if p < 9:
+                d = np.zeros((3, 3))
+                d.flat[p] = _STEP
+                w = omega + omega @ d.T
+            else:
+                w = omega.copy()
+                w[:, p - 9] -= _STEP
+            jacobians[:, :, p] = (base.inv() * relative(w)).as_rotvec() / _STEP
+        return cls(base, jacobians)
+
+    def at(self, theta: np.ndarray) -> Rotation:
+        """The relative rotations with the calibration theta (CALIBRATION,) applied."""
+        return self.rotations * Rotation.from_rotvec(self.jacobians @ theta)
 
 
 @dataclass
@@ -129,16 +192,15 @@ def select_keyframes(metered: np.ndarray, orientations: Rotation) -> np.ndarray:
     return np.array(keys)
 
 
-def candidate_pairs(keys: np.ndarray, times: np.ndarray, orientations: Rotation, hfov_deg: float) -> list[tuple[int, int]]:
-    """Index pairs (i < j) of keyframes to match: consecutive ones; for each keyframe the MAX_PAIRS nearest in
+def candidate_pairs(t: np.ndarray, orientations: Rotation, hfov_deg: float) -> list[tuple[int, int]]:
+    """Index pairs (i < j) of keyframes (times t, orientations) to match: consecutive ones; for each keyframe the MAX_PAIRS nearest in
     viewing direction among those within PAIR_OVERLAP of the field of view taken within LOOP_S of it; and as
     many among those taken longer before or after (the spiral's other turns: the loop closures, which a
     nearest-only choice would crowd out with the keyframe's own neighbours)."""
-    axes = orientations[keys].apply([0.0, 0.0, 1.0])
+    axes = orientations.apply([0.0, 0.0, 1.0])
     angles = np.degrees(np.arccos(np.clip(axes @ axes.T, -1.0, 1.0)))
-    t = times[keys]
-    pairs = {(i, i + 1) for i in range(len(keys) - 1)}
-    for i in range(len(keys)):
+    pairs = {(i, i + 1) for i in range(len(t) - 1)}
+    for i in range(len(t)):
         near = np.abs(t - t[i]) <= LOOP_S
         for group in (near, ~near):
             order = [j for j in np.argsort(angles[i]) if j != i and group[j] and angles[i, j] < PAIR_OVERLAP * hfov_deg]
@@ -146,48 +208,76 @@ def candidate_pairs(keys: np.ndarray, times: np.ndarray, orientations: Rotation,
     return sorted(pairs)
 
 
-def _residuals(x, initial, ii, jj, q_inv, inv_sigma, prior_inv, prior_inv_sigma):
-    """Per constraint (i, j, Q): rotvec(Q⁻¹ R_i⁻¹ R_j) / sigma, with R_k = exp(x_k) R⁰_k (x_0 = 0); then per
-    keyframe its prior: rotvec(P_k⁻¹ R_k) / sigma_P."""
-    rot = Rotation.from_rotvec(np.vstack([np.zeros(3), x.reshape(-1, 3)])) * initial
-    relative = (q_inv * rot[ii].inv() * rot[jj]).as_rotvec() * inv_sigma[:, None]
-    absolute = (prior_inv * rot).as_rotvec() * prior_inv_sigma[:, None]
-    return np.concatenate([relative.ravel(), absolute.ravel()])
+def _residuals(x, initial, ii, jj, q_inv, inv_sigma, prior_inv, prior_inv_sigma, gyro, gyro_inv_sigma, theta_inv_sigma):
+    """Per constraint (i, j, Q): rotvec(Q⁻¹ R_i⁻¹ R_j) / sigma, with R_k = exp(x_k) R⁰_k (x_0 = 0); per keyframe
+    its prior, rotvec(P_k⁻¹ R_k) / sigma_P; with gyro (GyroIntervals), per consecutive pair the same for the
+    gyroscope's rotation under the calibration theta (x's last CALIBRATION entries), and theta's prior."""
+    m = len(initial)
+    rot = Rotation.from_rotvec(np.vstack([np.zeros(3), x[:3 * (m - 1)].reshape(-1, 3)])) * initial
+    parts = [((q_inv * rot[ii].inv() * rot[jj]).as_rotvec() * inv_sigma[:, None]).ravel(),
+             ((prior_inv * rot).as_rotvec() * prior_inv_sigma[:, None]).ravel()]
+    if gyro is not None:
+        theta = x[3 * (m - 1):]
+        chain = gyro.at(theta).inv() * rot[:-1].inv() * rot[1:]
+        parts += [(chain.as_rotvec() * gyro_inv_sigma[:, None]).ravel(), theta * theta_inv_sigma]
+    return np.concatenate(parts)
 
 
 def solve(initial: Rotation, constraints: list[tuple[int, int, Rotation, float]], prior: Rotation | None = None,
-          prior_sigma: np.ndarray | None = None) -> tuple[Rotation, float, float]:
+          prior_sigma: np.ndarray | None = None, gyro: GyroIntervals | None = None, gyro_sigma: np.ndarray | None = None,
+          theta_sigma: np.ndarray | None = None, near: bool = False) -> tuple[Rotation, float, float, np.ndarray]:
     """The keyframe orientations minimising the robust sum over constraints (i, j, Q, sigma) of
     |rotvec(Q⁻¹ R_i⁻¹ R_j)|² / sigma² and over keyframes of |rotvec(P_k⁻¹ R_k)|² / sigma_k² (prior P, where
-    given; sigma inf: none), keyframe 0 held; with the cost before and after."""
+    given; sigma inf: none), keyframe 0 held; with gyro, also the chain of the gyroscope's relative rotations
+    (gyro_sigma each) under a calibration estimated with them (prior 0, theta_sigma). Returns the
+    orientations, the cost before and after, and the calibration (zeros without gyro). near: the start is
+    close already (a second round), the soft-L1 stage is skipped."""
     m = len(initial)
     if m < 2:
-        return initial, 0.0, 0.0
-    ii = np.array([c[0] for c in constraints])
-    jj = np.array([c[1] for c in constraints])
-    q_inv = Rotation.concatenate([c[2] for c in constraints]).inv()
-    inv_sigma = 1.0 / np.array([c[3] for c in constraints])
+        return initial, 0.0, 0.0, np.zeros(CALIBRATION)
+    ii = np.array([c[0] for c in constraints], dtype=int)
+    jj = np.array([c[1] for c in constraints], dtype=int)
+    q_inv = Rotation.concatenate([c[2] for c in constraints]).inv() if constraints else Rotation.identity(0)
+    inv_sigma = 1.0 / np.array([c[3] for c in constraints], dtype=np.float64)
     prior = initial if prior is None else prior
     prior_inv_sigma = np.zeros(m) if prior_sigma is None else 1.0 / np.asarray(prior_sigma, dtype=np.float64)
-    args = (initial, ii, jj, q_inv, inv_sigma, prior.inv(), prior_inv_sigma)
-    sparsity = lil_matrix((3 * len(constraints) + 3 * m, 3 * (m - 1)), dtype=np.int8)
+    calibrated = gyro is not None
+    args = (initial, ii, jj, q_inv, inv_sigma, prior.inv(), prior_inv_sigma, gyro,
+            None if not calibrated else 1.0 / np.asarray(gyro_sigma, dtype=np.float64),
+            None if not calibrated else 1.0 / np.asarray(theta_sigma, dtype=np.float64))
+    n_vars = 3 * (m - 1) + (CALIBRATION if calibrated else 0)
+    rows = 3 * len(constraints) + 3 * m + ((3 * (m - 1) + CALIBRATION) if calibrated else 0)
+    sparsity = lil_matrix((rows, n_vars), dtype=np.int8)
+
+    def depends(r, k):
+        if k > 0:
+            sparsity[3 * r:3 * r + 3, 3 * (k - 1):3 * k] = 1
+
     for r, (i, j) in enumerate(zip(ii, jj)):
-        for k in (i, j):
-            if k > 0:
-                sparsity[3 * r:3 * r + 3, 3 * (k - 1):3 * k] = 1
-    for k in range(1, m):
-        r = len(constraints) + k
-        sparsity[3 * r:3 * r + 3, 3 * (k - 1):3 * k] = 1
-    x0 = np.zeros(3 * (m - 1))
+        depends(r, i)
+        depends(r, j)
+    for k in range(m):
+        depends(len(constraints) + k, k)
+    if calibrated:
+        base = len(constraints) + m
+        for i in range(m - 1):
+            depends(base + i, i)
+            depends(base + i, i + 1)
+            sparsity[3 * (base + i):3 * (base + i) + 3, 3 * (m - 1):] = 1
+        for p in range(CALIBRATION):
+            sparsity[3 * (base + m - 1) + p, 3 * (m - 1) + p] = 1
+    x0 = np.zeros(n_vars)
     # Soft-L1 first (convex enough to pull a drifted start in), then Cauchy from there: its influence falls
     # off with the residual, so a false loop closure is all but ignored (started far off, it would stall).
-    result = least_squares(_residuals, x0, args=args, jac_sparsity=sparsity, loss="soft_l1", f_scale=LOSS_SCALE,
-                           x_scale="jac", method="trf", max_nfev=50)
-    result = least_squares(_residuals, result.x, args=args, jac_sparsity=sparsity, loss="cauchy", f_scale=LOSS_SCALE,
+    x1 = x0 if near else least_squares(_residuals, x0, args=args, jac_sparsity=sparsity, loss="soft_l1",
+                                       f_scale=LOSS_SCALE, x_scale="jac", method="trf", max_nfev=50).x
+    result = least_squares(_residuals, x1, args=args, jac_sparsity=sparsity, loss="cauchy", f_scale=LOSS_SCALE,
                            x_scale="jac", method="trf", max_nfev=50)
     before = float(np.sum(_residuals(x0, *args) ** 2))
-    refined = Rotation.from_rotvec(np.vstack([np.zeros(3), result.x.reshape(-1, 3)])) * initial
-    return refined, before, float(np.sum(result.fun**2))
+    x = result.x
+    refined = Rotation.from_rotvec(np.vstack([np.zeros(3), x[:3 * (m - 1)].reshape(-1, 3)])) * initial
+    theta = x[3 * (m - 1):] if calibrated else np.zeros(CALIBRATION)
+    return refined, before, float(np.sum(result.fun**2)), theta
 
 
 def interpolate(times: np.ndarray, keys: np.ndarray, refined_keys: Rotation, imu: Rotation) -> Rotation:
@@ -201,29 +291,57 @@ def interpolate(times: np.ndarray, keys: np.ndarray, refined_keys: Rotation, imu
 
 
 def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, online: Rotation, frames, hfov_deg: float,
-           camera: CameraIntrinsics, gyro: GyroNoise, seed: int = 0) -> Refinement:
+           camera: CameraIntrinsics, gyro: GyroNoise, seed: int = 0, gyro_stream: tuple | None = None,
+           aligned: np.ndarray | None = None) -> Refinement:
     """Refined orientations of every frame. times (K,): seconds; metered: indices of the frames taken at the
     metered exposure (the ones matched); imu: the IMU's camera-to-world orientations (K,); online: the
-    online pass's (candidate pairs and the initial values); frames(k): frame k's 8-bit codes."""
+    online pass's (candidate pairs, initial values and, near its successful alignments (aligned (K,) bool),
+    weak priors); frames(k): frame k's 8-bit codes; gyro_stream: (t_ns, omega, camera-to-device mount) of
+    the raw gyroscope, whose relative rotations between keyframes are then the chain, with its calibration
+    estimated (else the fused orientation's, uncalibrated)."""
     keys = select_keyframes(metered, online)
     features = KeyframeFeatures(camera)  # (frames(k) may give the frame at features.small's size already)
     keyframes = [features(int(k), frames(int(k))) for k in keys]
     rng = np.random.default_rng(seed)
-    constraints: list[tuple[int, int, Rotation, float]] = []
-    # The gyroscope's relative rotation between consecutive keyframes: always there, featureless or not.
-    for i in range(len(keys) - 1):
-        q = imu[keys[i]].inv() * imu[keys[i + 1]]
-        constraints.append((i, i + 1, q, gyro.sigma(times[keys[i + 1]] - times[keys[i]], q.magnitude())))
-    pairs = candidate_pairs(keys, times, online, hfov_deg)
-    used = 0
-    for i, j in pairs:
-        found = match_pair(keyframes[i], keyframes[j], rng)
-        if found is not None and np.degrees((found[0].inv() * online[keys[i]].inv() * online[keys[j]]).magnitude()) < PAIR_GATE_DEG:
-            constraints.append((i, j, found[0], found[1]))
-            used += 1
+    chain: list[tuple[int, int, Rotation, float]] = []
+    dts = np.diff(times[keys])
+    intervals, chain_sigma, theta_sigma = None, None, None
+    if gyro_stream is not None and len(keys) > 1:
+        intervals = GyroIntervals.of(gyro_stream[0], gyro_stream[1], times[keys], gyro_stream[2])
+        # calibrated, the chain is as good as the gyroscope's noise and the bias's wander
+        chain_sigma = np.array([gyro.sigma(dt, 0.0, calibrated=True) for dt in dts])
+        theta_sigma = np.concatenate([np.full(9, max(gyro.scale_factor, 1e-4)), np.full(3, max(gyro.bias, 1e-5))])
+    else:
+        for i in range(len(keys) - 1):
+            q = imu[keys[i]].inv() * imu[keys[i + 1]]
+            chain.append((i, i + 1, q, gyro.sigma(dts[i], q.magnitude())))
+    # Priors from the online pass only where it had just aligned (a pass that failed, a gyroscope drifting
+    # faster than its gate, holds nothing).
+    near = np.zeros(len(keys), dtype=bool)
+    if aligned is not None and aligned.any():
+        aligned_t = times[np.flatnonzero(aligned)]
+        gap = np.abs(times[keys][:, None] - aligned_t[None, :]).min(axis=1)
+        near = gap <= PRIOR_REACH_S
+    prior_sigma = np.where(near, np.radians(ONLINE_SIGMA_DEG), np.inf)
     # Start from the online orientations moved so that keyframe 0 is the IMU's (the gauge).
-    start = imu[keys[0]] * online[keys[0]].inv() * online[keys]
-    # The online pass's orientations as weak priors: where keyframes share no features (a blank ceiling) the
-    # online alignment against the whole probe so far still held them.
-    refined_keys, before, after = solve(start, constraints, start, np.full(len(keys), np.radians(ONLINE_SIGMA_DEG)))
-    return Refinement(interpolate(times, keys, refined_keys, imu), keys, used, len(pairs), before, after)
+    estimate = imu[keys[0]] * online[keys[0]].inv() * online[keys]
+    prior = estimate
+    matched: dict[tuple[int, int], tuple[Rotation, float, int] | None] = {}
+    pairs: set[tuple[int, int]] = set()
+    before = after = 0.0
+    for round in range(ROUNDS):  # pairs chosen by the estimate so far: a drifted start finds its loops in round 2
+        pairs.update(candidate_pairs(times[keys], estimate, hfov_deg))
+        constraints = list(chain)
+        for i, j in sorted(pairs):
+            if (i, j) not in matched:
+                matched[(i, j)] = match_pair(keyframes[i], keyframes[j], rng)
+            found = matched[(i, j)]
+            # a pair far from what the estimate says (more than the gyroscope can drift between the two) is false
+            gate = np.radians(PAIR_GATE_DEG) + 3 * gyro.bias * abs(times[keys[j]] - times[keys[i]])
+            if found is not None and (found[0].inv() * estimate[i].inv() * estimate[j]).magnitude() < gate:
+                constraints.append((i, j, found[0], found[1]))
+        estimate, cost_before, after, _ = solve(estimate, constraints, prior, prior_sigma, intervals, chain_sigma,
+                                                theta_sigma, near=round > 0)
+        before = before or cost_before
+    used = len(constraints) - len(chain)
+    return Refinement(interpolate(times, keys, estimate, imu), keys, used, len(pairs), before, after)

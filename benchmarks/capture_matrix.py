@@ -1,0 +1,153 @@
+"""The capture's fidelity over a matrix of cases: every bundled environment with three seeds, each at a quarter
+of its intensity (the dim case), the drifting gyroscope's device on three environments, a 20 s sweep, the
+night scene. Each case is recorded (the sweep only) and captured; one row per case, then the medians and
+the worst cases; the table as Markdown and JSON.
+
+    python benchmarks/capture_matrix.py -o matrix            # every case: about an hour on 2 cores
+    python benchmarks/capture_matrix.py -o matrix --quick    # 4 cases: about 6 minutes
+    python benchmarks/capture_matrix.py -o matrix --only night,dim-city
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
+from arsim.capture.response import response_error
+from arsim.core.assets import assets_dir, scenarios_dir
+from arsim.core.errors import ArsimError
+from arsim.core.files import json_text, write_text_atomic
+from arsim.core.progress import progress_bar
+from arsim.evaluate.capture_report import capture_metrics
+from arsim.scenario.environment import load_environment
+from arsim.scenario.loader import parse_scenario
+from arsim.sensors.camera import ResponseCurve
+from arsim.sensors.recording import load_recording, record
+
+ENVIRONMENTS = sorted(p.stem for p in (assets_dir() / "envmaps").glob("*.exr"))
+DRIFTING = (scenarios_dir() / "drifting_gyro.toml").read_text(encoding="utf-8")
+GYRO = DRIFTING[DRIFTING.index("[device.gyroscope]"):]  # the drifting device's gyroscope section
+
+# (column, key in the capture's metrics, digits)
+COLUMNS = (("orientation RMS corrected (deg)", "orientation_rms_deg_corrected", 3),
+           ("uncorrected (deg)", "orientation_rms_deg_uncorrected", 2),
+           ("online pass (deg)", "orientation_rms_deg_online", 3),
+           ("coverage %", "coverage_pct", 1),
+           ("irradiance err %", "irradiance_mean_err_pct", 2),
+           ("s=80 err %", "reflection_s80_mean_err_pct", 2),
+           ("brightest source ratio", "brightest_source_ratio", 3),
+           ("frames/s", "frames_per_second", 1))
+
+
+def case_toml(env: str, seed: int, intensity: float = 1.0, extra: str = "") -> str:
+    return (f'[run]\nname = "matrix"\nseed = {seed}\n[environment]\nmap = "envmaps/{env}.exr"\nprobe_size = 512\n'
+            f"intensity = {intensity}\n[ar]\nenabled = false\n{extra}")
+
+
+def cases() -> dict[str, str]:
+    """Every case of the matrix by name: its scenario's TOML."""
+    out = {}
+    for env in ENVIRONMENTS:
+        for seed in (0, 1, 2):
+            out[f"{env}-s{seed}"] = case_toml(env, seed)
+    for env in ENVIRONMENTS:
+        out[f"dim-{env}"] = case_toml(env, 0, 0.25)
+    for env in ("courtyard", "interior", "city"):
+        out[f"drifting-{env}"] = case_toml(env, 4, extra="[capture]\nduration_s = 20.0\n" + GYRO)
+    out["sweep-20s"] = case_toml("interior", 0, extra="[capture]\nduration_s = 20.0\n")
+    night = (scenarios_dir() / "night.toml").read_text(encoding="utf-8")
+    out["night"] = night + "\n[ar]\nenabled = false\n" if "[ar]" not in night else night.replace("[ar]", "[ar]\nenabled = false", 1)
+    return out
+
+
+QUICK = ("interior-s0", "dim-sunrise", "drifting-courtyard", "sweep-20s")
+
+
+def run_case(text: str, work: Path) -> dict:
+    """Record the sweep and capture it: the capture's metrics, or the one line that stopped it."""
+    scenario = parse_scenario(text, "matrix case", assets_dir())
+    start = time.perf_counter()
+    try:
+        record(scenario, work / "rec")
+        rec = load_recording(work / "rec")
+        sc = recording_scenario(rec)
+        settings = CaptureSettings.of(sc)
+        result = capture(rec, settings)
+    except ArsimError as exc:
+        return {"status": f"refused: {exc}", "seconds": time.perf_counter() - start}
+    cam = sc.device.camera
+    true_response = ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
+    truth = load_environment(dataclasses.replace(sc.environment, probe_size=settings.size))
+    metrics, _ = capture_metrics(result, truth, response_error(result.response, true_response))
+    return {"status": "ok", "seconds": time.perf_counter() - start, **{k: metrics[k] for _, k, _ in COLUMNS}}
+
+
+def table(rows: dict[str, dict]) -> str:
+    header = "| case | status | " + " | ".join(c for c, _, _ in COLUMNS) + " |"
+    lines = [header, "|" + "---|" * (len(COLUMNS) + 2)]
+    for name, r in rows.items():
+        cells = [f"{r[k]:.{d}f}" if k in r else "" for _, k, d in COLUMNS]
+        lines.append(f"| {name} | {r['status'] if r['status'] == 'ok' else r['status'][:80]} | " + " | ".join(cells) + " |")
+    done = [r for r in rows.values() if r["status"] == "ok"]
+    if done:
+        for label, f in (("median", np.median), ("worst", None)):
+            cells = []
+            for _, k, d in COLUMNS:
+                values = np.array([r[k] for r in done])
+                if f is not None:
+                    value = f(values)
+                elif k in ("coverage_pct", "frames_per_second"):
+                    value = values.min()
+                elif k == "brightest_source_ratio":
+                    value = values[np.argmax(np.abs(np.log(values)))]
+                else:
+                    value = values.max()
+                cells.append(f"{value:.{d}f}")
+            lines.append(f"| **{label}** | {len(done)} of {len(rows)} ok | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="example:\n  python benchmarks/capture_matrix.py -o matrix --quick")
+    parser.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="writes matrix.md and matrix.json")
+    parser.add_argument("--quick", action="store_true", help=f"only {', '.join(QUICK)}")
+    parser.add_argument("--only", metavar="NAMES", help="comma-separated case names")
+    args = parser.parse_args()
+    every = cases()
+    names = list(QUICK) if args.quick else (args.only.split(",") if args.only else list(every))
+    unknown = [n for n in names if n not in every]
+    if unknown:
+        print(f"capture_matrix: unknown case {unknown[0]}; the cases: {', '.join(every)}", file=sys.stderr)
+        return 2
+    args.output.mkdir(parents=True, exist_ok=True)
+    rows: dict[str, dict] = {}
+    with progress_bar(f"capture matrix: {len(names)} cases", len(names)) as update:
+        for k, name in enumerate(names):
+            work = Path(tempfile.mkdtemp(prefix="capture-matrix-"))
+            try:
+                rows[name] = run_case(every[name], work)
+            finally:
+                shutil.rmtree(work, ignore_errors=True)
+            r = rows[name]
+            print(f"{name}: {r['status']}" + (f", {r['orientation_rms_deg_corrected']:.3f} deg, irradiance "
+                                              f"{r['irradiance_mean_err_pct']:.2f} %, s=80 {r['reflection_s80_mean_err_pct']:.2f} %"
+                                              if r["status"] == "ok" else "") + f" ({r['seconds']:.0f} s)", flush=True)
+            update(completed=k + 1)
+    text = table(rows)
+    print(text)
+    write_text_atomic(args.output / "matrix.md", "# Capture fidelity matrix\n\n" + text)
+    write_text_atomic(args.output / "matrix.json", json_text(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
