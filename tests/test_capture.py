@@ -242,3 +242,35 @@ def test_unusable_recordings_are_refused(short_recording, tmp_path, damage, mess
     r = arsim("capture", rec, "-o", tmp_path / "out")
     assert_one_line_error(r, message)
     assert not (tmp_path / "out" / "env.exr").exists()
+
+
+def test_a_scene_without_features_falls_back_to_the_imu_and_says_so(tmp_path):
+    """A sky-like gradient with nothing to match: no alignment, no keyframe pair; the orientations are the
+    IMU's, and metrics.json says so."""
+    import json
+
+    from arsim.core.conventions import equirect_directions
+    from arsim.core.hdr_io import write_exr
+
+    up = equirect_directions(64)[..., 1]
+    write_exr(tmp_path / "flat.exr", np.repeat((0.3 + 0.2 * up)[..., None], 3, axis=-1).astype(np.float32))
+    (tmp_path / "flat.toml").write_text(f"""
+[environment]
+map = "{(tmp_path / 'flat.exr').as_posix()}"
+probe_size = 64
+[capture]
+duration_s = 4.0
+capture_size = 64
+[device.camera]
+width = 160
+height = 120
+fps = 10.0
+[ar]
+enabled = false
+""")
+    r = arsim("capture", tmp_path / "flat.toml", "-o", tmp_path / "out")
+    assert r.returncode == 0, r.stderr
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert metrics["alignments_succeeded"] == 0 and metrics["loop_closures"] == 0 and metrics["refined"]
+    assert any("the IMU's alone" in w for w in metrics["warnings"]) and "the IMU's alone" in r.stderr
+    assert abs(metrics["orientation_rms_deg_corrected"] - metrics["orientation_rms_deg_uncorrected"]) < 0.05

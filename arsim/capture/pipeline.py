@@ -25,8 +25,9 @@ from arsim.sensors.camera import SensorSettings, vignette
 from arsim.sensors.recording import Recording
 
 
-# The largest plausible correction: this much, plus this much per second unaligned (a gyroscope biased by
-# 0.5 degrees/s drifts that fast, and a tighter rate dropped its true corrections on the interior's ceiling).
+# The largest plausible correction: this much, plus per second unaligned the larger of this rate (a tighter
+# one dropped true corrections on the interior's ceiling) and three times the device's own bias figures (a
+# gyroscope with a 1 degree/s turn-on bias drifts that fast: a fixed 1 degree/s rejected its corrections).
 GATE_DEG, GATE_DEG_PER_S = 0.5, 1.0
 
 
@@ -126,6 +127,8 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     aligner = Aligner(camera, falloff, response, scenario.run.seed)
     uncorrected, truth = fused_camera_orientations(rec), frame_camera_orientations(rec)
     correction = DriftCorrection(settings.correction_gain)  # corrected = correction * uncorrected
+    gyro_noise = GyroNoise.of(scenario.device.gyroscope)
+    gate_rate = max(np.radians(GATE_DEG_PER_S), 3 * gyro_noise.bias)  # rad/s
     corrected, aligned = [], np.zeros(len(rec.frames), dtype=bool)
     times, last_aligned_t = np.array([f["t_ns"] for f in rec.frames]) / 1e9, 0.0
     start = time.perf_counter()
@@ -147,7 +150,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
                 found = aligner.align(codes, accumulator, predicted.as_matrix(), exposure_scale)
                 # A match that would turn the view by more than the IMU can have drifted since the last
                 # one is a false match (few features, repeated patterns): it is dropped like a failed one.
-                plausible = np.radians(GATE_DEG + GATE_DEG_PER_S * (times[k] - last_aligned_t))
+                plausible = np.radians(GATE_DEG) + gate_rate * (times[k] - last_aligned_t)
                 if found.rotation is not None and found.rotation.magnitude() <= plausible:
                     last_aligned_t = times[k]
                     correction.update(predicted * found.rotation * uncorrected[k].inv())
@@ -168,7 +171,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     # The refined pass: every keyframe orientation at once, then the frames accumulated again with them.
     gyro = rec.imu["gyroscope"]
     refinement = refine(times, np.array(sorted(metered_small)), uncorrected, online, metered_small.__getitem__,
-                        scenario.device.camera.hfov_deg, camera, GyroNoise.of(scenario.device.gyroscope),
+                        scenario.device.camera.hfov_deg, camera, gyro_noise,
                         scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))),
                         aligned)
     accumulator = ProbeAccumulator(settings.size, camera, falloff, levels=len(exposure_levels))

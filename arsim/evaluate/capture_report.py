@@ -92,6 +92,14 @@ def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_erro
     return metrics, complete
 
 
+def unmatched_warning(metrics: dict) -> str | None:
+    """Where nothing could be matched (no texture anywhere), the orientations are the gyroscope's alone."""
+    if metrics["alignments_succeeded"] or metrics["loop_closures"]:
+        return None
+    return ("no frame could be aligned and no keyframes matched (a scene without features): the orientations are "
+            "the IMU's alone, the gyroscope integrated with its bias uncorrected; drift.png shows how far that is off")
+
+
 def brightest_warning(metrics: dict) -> str | None:
     ratio, clipped = metrics["brightest_source_ratio"], metrics["brightest_source_clipped_pct"]
     if 0.8 <= ratio <= 1.25:
@@ -169,6 +177,6 @@ def write_capture(result: CaptureResult, truth: np.ndarray, response_error: dict
     plot_coverage_map(result, out_dir / "coverage.png")
     plot_drift(result, out_dir / "drift.png")
     plot_probe_vs_truth(complete, truth, out_dir / "probe_vs_truth.png")
-    warning = brightest_warning(metrics)
-    write_text_atomic(out_dir / "metrics.json", json_text(metrics | {"warnings": [warning] if warning else []}))
-    return metrics | {"warnings": [warning] if warning else []}
+    warnings = [w for w in (brightest_warning(metrics), unmatched_warning(metrics)) if w]
+    write_text_atomic(out_dir / "metrics.json", json_text(metrics | {"warnings": warnings}))
+    return metrics | {"warnings": warnings}
