@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation, Slerp
 
 from arsim.capture.align import MIN_INLIERS, robust_rotation, scaled_camera
@@ -223,6 +223,55 @@ def _residuals(x, initial, ii, jj, q_inv, inv_sigma, prior_inv, prior_inv_sigma,
     return np.concatenate(parts)
 
 
+def _jacobian(x, initial, ii, jj, q_inv, inv_sigma, prior_inv, prior_inv_sigma, gyro, gyro_inv_sigma, theta_inv_sigma):
+    """_residuals' Jacobian to first order in the residuals (the log's own Jacobian at a small rotation is the
+    identity): a constraint rotvec(A R_j ...) moves by A's matrix times a keyframe's perturbation (world
+    axes), by minus it for R_i. Sparse; exact at the solution, so Gauss-Newton converges to the same point."""
+    m = len(initial)
+    rot = Rotation.from_rotvec(np.vstack([np.zeros(3), x[:3 * (m - 1)].reshape(-1, 3)])) * initial
+    rows, cols, vals = [], [], []
+
+    def block(row0, k, matrices, scale):
+        """3x3 blocks: residual rows row0 + 3n.. by keyframe k's variables (k = 0 is held: none)."""
+        keep = k > 0
+        if not np.any(keep):
+            return
+        r = (np.asarray(row0)[keep][:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
+        c = (3 * (np.asarray(k)[keep] - 1))[:, None, None] + np.arange(3)[None, None, :].repeat(3, axis=1)
+        rows.append(r.ravel())
+        cols.append(c.ravel())
+        vals.append((matrices[keep] * scale[keep][:, None, None]).ravel())
+
+    n = len(ii)
+    if n:
+        a = (q_inv * rot[ii].inv()).as_matrix()
+        block(3 * np.arange(n), jj, a, inv_sigma)
+        block(3 * np.arange(n), ii, a, -inv_sigma)
+    base = 3 * n
+    block(base + 3 * np.arange(m), np.arange(m), np.broadcast_to(prior_inv.as_matrix(), (m, 3, 3)) if len(prior_inv) == 1
+          else prior_inv.as_matrix(), prior_inv_sigma)
+    base += 3 * m
+    n_vars = 3 * (m - 1)
+    if gyro is not None:
+        theta = x[3 * (m - 1):]
+        a = (gyro.at(theta).inv() * rot[:-1].inv()).as_matrix()
+        chain_rows = base + 3 * np.arange(m - 1)
+        block(chain_rows, np.arange(1, m), a, gyro_inv_sigma)
+        block(chain_rows, np.arange(m - 1), a, -gyro_inv_sigma)
+        r = (chain_rows[:, None, None] + np.arange(3)[None, :, None]).repeat(CALIBRATION, axis=2)
+        c = np.broadcast_to(n_vars + np.arange(CALIBRATION)[None, None, :], r.shape)
+        rows.append(r.ravel())
+        cols.append(c.ravel())
+        vals.append((-gyro.jacobians * gyro_inv_sigma[:, None, None]).ravel())
+        base += 3 * (m - 1)
+        rows.append(base + np.arange(CALIBRATION))
+        cols.append(n_vars + np.arange(CALIBRATION))
+        vals.append(theta_inv_sigma)
+        n_vars += CALIBRATION
+    total = base + (CALIBRATION if gyro is not None else 0)
+    return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(total, n_vars))
+
+
 def solve(initial: Rotation, constraints: list[tuple[int, int, Rotation, float]], prior: Rotation | None = None,
           prior_sigma: np.ndarray | None = None, gyro: GyroIntervals | None = None, gyro_sigma: np.ndarray | None = None,
           theta_sigma: np.ndarray | None = None, near: bool = False) -> tuple[Rotation, float, float, np.ndarray]:
@@ -246,32 +295,12 @@ def solve(initial: Rotation, constraints: list[tuple[int, int, Rotation, float]]
             None if not calibrated else 1.0 / np.asarray(gyro_sigma, dtype=np.float64),
             None if not calibrated else 1.0 / np.asarray(theta_sigma, dtype=np.float64))
     n_vars = 3 * (m - 1) + (CALIBRATION if calibrated else 0)
-    rows = 3 * len(constraints) + 3 * m + ((3 * (m - 1) + CALIBRATION) if calibrated else 0)
-    sparsity = lil_matrix((rows, n_vars), dtype=np.int8)
-
-    def depends(r, k):
-        if k > 0:
-            sparsity[3 * r:3 * r + 3, 3 * (k - 1):3 * k] = 1
-
-    for r, (i, j) in enumerate(zip(ii, jj)):
-        depends(r, i)
-        depends(r, j)
-    for k in range(m):
-        depends(len(constraints) + k, k)
-    if calibrated:
-        base = len(constraints) + m
-        for i in range(m - 1):
-            depends(base + i, i)
-            depends(base + i, i + 1)
-            sparsity[3 * (base + i):3 * (base + i) + 3, 3 * (m - 1):] = 1
-        for p in range(CALIBRATION):
-            sparsity[3 * (base + m - 1) + p, 3 * (m - 1) + p] = 1
     x0 = np.zeros(n_vars)
     # Soft-L1 first (convex enough to pull a drifted start in), then Cauchy from there: its influence falls
     # off with the residual, so a false loop closure is all but ignored (started far off, it would stall).
-    x1 = x0 if near else least_squares(_residuals, x0, args=args, jac_sparsity=sparsity, loss="soft_l1",
-                                       f_scale=LOSS_SCALE, x_scale="jac", method="trf", max_nfev=50).x
-    result = least_squares(_residuals, x1, args=args, jac_sparsity=sparsity, loss="cauchy", f_scale=LOSS_SCALE,
+    x1 = x0 if near else least_squares(_residuals, x0, jac=_jacobian, args=args, loss="soft_l1", f_scale=LOSS_SCALE,
+                                       x_scale="jac", method="trf", max_nfev=50).x
+    result = least_squares(_residuals, x1, jac=_jacobian, args=args, loss="cauchy", f_scale=LOSS_SCALE,
                            x_scale="jac", method="trf", max_nfev=50)
     before = float(np.sum(_residuals(x0, *args) ** 2))
     x = result.x
