@@ -232,8 +232,33 @@ def _saturated(rec):
         cv2.imwrite(str(png), np.full((72, 96, 3), 255, np.uint8))
 
 
+def _one_exposure_burst(rec):
+    lines = (rec / "burst.csv").read_text().splitlines()
+    first = lines[1].split(",")
+    (rec / "burst.csv").write_text("\n".join([lines[0]] + [",".join(first[:2] + [row.split(",")[2]]) for row in lines[1:]]) + "\n")
+
+
+def _never_overlapping(rec):
+    """Frames kept only where the true view has turned 70 degrees from the last kept one."""
+    from arsim.evaluate.recording_plots import frame_camera_orientations
+    from arsim.sensors.recording import load_recording
+
+    axes = frame_camera_orientations(load_recording(rec)).apply([0.0, 0.0, 1.0])
+    keep = [0]
+    for k in range(1, len(axes)):
+        if np.degrees(np.arccos(np.clip(axes[k] @ axes[keep[-1]], -1, 1))) >= 70:
+            keep.append(k)
+    assert len(keep) >= 3
+    lines = (rec / "frames.csv").read_text().splitlines()
+    (rec / "frames.csv").write_text("\n".join([lines[0]] + [lines[1 + k] for k in keep]) + "\n")
+    for k, line in enumerate(lines[1:]):
+        if k not in keep:
+            (rec / line.split(",")[-1]).unlink()
+
+
 @pytest.mark.parametrize("damage, message", [(_no_frames, "no frames"), (_no_burst, "no response burst"),
-                                             (_saturated, "saturated")])
+                                             (_saturated, "saturated"), (_one_exposure_burst, "same exposure"),
+                                             (_never_overlapping, "no two consecutive frames overlap")])
 def test_unusable_recordings_are_refused(short_recording, tmp_path, damage, message):
     import shutil
 

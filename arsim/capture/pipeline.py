@@ -109,6 +109,20 @@ def fused_camera_orientations(rec: Recording) -> Rotation:
     return Slerp(t_ns.astype(np.float64), fused)(t.astype(np.float64)) * Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))
 
 
+def _check_overlap(rec: Recording, orientations: Rotation, camera) -> None:
+    """Refuse a recording none of whose consecutive frames overlap (as the IMU sees them): nothing in it can
+    be aligned, and the probe would be a scatter of single views."""
+    if len(orientations) < 2:
+        return
+    axes = orientations.apply([0.0, 0.0, 1.0])
+    turns = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", axes[:-1], axes[1:]), -1.0, 1.0)))
+    fov = np.degrees(2 * np.arctan(0.5 * min(camera.width / camera.fx, camera.height / camera.fy)))
+    if np.all(turns >= fov):
+        raise ArsimError(f"{rec.folder}: no two consecutive frames overlap (the view turns {np.median(turns):.0f} degrees "
+                         f"between frames, more than the camera's {fov:.0f}-degree field of view); record with more "
+                         "frames per second or a slower sweep")
+
+
 def capture(rec: Recording, settings: CaptureSettings | None = None,
             progress: Callable[[float, float], None] = lambda fraction, coverage: None) -> CaptureResult:
     """Run the capture on a recording (settings: the recording's scenario's unless given);
@@ -126,6 +140,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     accumulator = ProbeAccumulator(settings.size, camera, falloff, levels=len(exposure_levels))
     aligner = Aligner(camera, falloff, response, scenario.run.seed)
     uncorrected, truth = fused_camera_orientations(rec), frame_camera_orientations(rec)
+    _check_overlap(rec, uncorrected, camera)
     correction = DriftCorrection(settings.correction_gain)  # corrected = correction * uncorrected
     gyro_noise = GyroNoise.of(scenario.device.gyroscope)
     gate_rate = max(np.radians(GATE_DEG_PER_S), 3 * gyro_noise.bias)  # rad/s
