@@ -121,7 +121,7 @@ def plot_drift(result: CaptureResult, path: Path) -> Path:
         ax.plot(result.t_s, orientation_errors_deg(result.corrected, result.truth), label="refined (what the probe holds)")
     else:
         ax.plot(result.t_s, orientation_errors_deg(result.corrected, result.truth), label="with feature alignment")
-    ax.scatter(result.t_s[result.aligned], np.zeros(result.aligned.sum()), s=2, color="tab:green", label="alignment succeeded")
+    ax.scatter(result.t_s[result.aligned], np.zeros(result.aligned.sum()), s=2, color="tab:gray", label="online alignment succeeded")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("camera orientation error (degrees)")
     ax.set_title("Drift of the capture's orientation against the truth")
