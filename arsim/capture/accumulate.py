@@ -1,9 +1,9 @@
 """Accumulation of camera frames into an HDR angle map (Kán's method): every texel whose direction
 falls inside a frame gets the frame's radiance there, weighted, and the probe is sum(w L) / sum(w).
 
-Weights per pixel and channel: a hat on the 8-bit code (well-exposed codes count most, 0 and 255 not
-at all) times a centre weight (the frame's vignetted edges and its rim count less) times the frame's
-trust, the square of its exposure (one code step is a radiance step inversely proportional to the
+Weights per pixel and channel: a weight on the 8-bit code (1 up to mid-grey, falling to 0 at 255: a
+dark code counts as much as a mid one, so that noise does not bias dark texels upward) times a centre
+weight (the frame's vignetted edges and its rim count less) times the frame's trust, the square of its exposure (one code step is a radiance step inversely proportional to the
 exposure: the weight is the inverse of that quantisation variance). A frame bracketed 14 EV down for
 the highlights thus adds nothing measurable where a metered frame saw the scene well, and is all
 there is where every metered frame clipped. Samples are bilinear with the weights inside (sum of
@@ -33,8 +33,12 @@ from arsim.core.conventions import CameraIntrinsics, anglemap_directions, anglem
 
 
 def hat_weights(level: int = 0) -> np.ndarray:
-    """Weight of each 8-bit code (256,) in a frame of this exposure level: for the longest, a triangle
-    peaking at mid-grey, 0 at 0 and at 255; for the shorter ones, 1 but at 255. Those frames are there
+    """Weight of each 8-bit code (256,) in a frame of this exposure level: for the longest, 1 up to
+    mid-grey, falling to 0 at 255; for the shorter ones, 1 but at 255. Not a hat rising from code 0: a
+    weight that grows with the observed code biases a noisy dark texel upward (its mean weighted by
+    itself is E[c²]/E[c], the noise's variance over the mean too bright, and code 0 clipped away), which
+    left the night's and the dim scenes' dark walls 6-17 % too bright (night s = 80 error 10.6 % -> 3.6 %,
+    the default's 1.61 -> 1.13 %). Those frames are there
     for the highlights, and what a sample of theirs says is dominated by where it lands (a lamp a few
     pixels wide, registered to a fraction of a degree), not by its noise: a dark sample beside a lamp
     says "not the lamp here" as loudly as a bright one says "the lamp", or the lamp would grow by
@@ -42,7 +46,7 @@ def hat_weights(level: int = 0) -> np.ndarray:
     codes = np.arange(256, dtype=np.float64)
     if level > 0:
         return np.where(codes < 255, 1.0, 0.0)
-    return np.minimum(codes, 255.0 - codes) / 127.5
+    return np.minimum(127.5, 255.0 - codes) / 127.5
 
 
 def centre_weights(camera: CameraIntrinsics, falloff: np.ndarray) -> np.ndarray:
