@@ -3,7 +3,7 @@ of its intensity (the dim case), the drifting gyroscope's device on three enviro
 night scene. Each case is recorded (the sweep only) and captured; one row per case, then the medians and
 the worst cases; the table as Markdown and JSON.
 
-    python benchmarks/capture_matrix.py -o matrix            # every case (35): about 50 minutes on 2 cores
+    python benchmarks/capture_matrix.py -o matrix            # every case (37): about 50 minutes on 2 cores
     python benchmarks/capture_matrix.py -o matrix --quick    # 4 cases: about 6 minutes
     python benchmarks/capture_matrix.py -o matrix --only night,dim-city
 """
