@@ -142,8 +142,8 @@ class KeyframeFeatures:
     """SIFT on each keyframe at a quarter of the frame's size (what the online aligner sees), contrast
     equalised first; bearings unprojected through the camera."""
 
-    def __init__(self, camera: CameraIntrinsics, scale: float = 0.25):
-        self.camera = scaled_camera(camera, scale)
+    def __init__(self, camera: CameraIntrinsics):
+        self.camera = scaled_camera(camera)
         self.sift = cv2.SIFT_create(nfeatures=800, contrastThreshold=0.01)
         self.clahe = cv2.createCLAHE(clipLimit=6.0, tileGridSize=(4, 4))
 
@@ -248,8 +248,7 @@ def _jacobian(x, initial, ii, jj, q_inv, inv_sigma, prior_inv, prior_inv_sigma, 
         block(3 * np.arange(n), jj, a, inv_sigma)
         block(3 * np.arange(n), ii, a, -inv_sigma)
     base = 3 * n
-    block(base + 3 * np.arange(m), np.arange(m), np.broadcast_to(prior_inv.as_matrix(), (m, 3, 3)) if len(prior_inv) == 1
-          else prior_inv.as_matrix(), prior_inv_sigma)
+    block(base + 3 * np.arange(m), np.arange(m), prior_inv.as_matrix(), prior_inv_sigma)
     base += 3 * m
     n_vars = 3 * (m - 1)
     if gyro is not None:
@@ -358,7 +357,7 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, online: Rotati
     matched: dict[tuple[int, int], tuple[Rotation, float, int] | None] = {}
     pairs: set[tuple[int, int]] = set()
     before = after = 0.0
-    for round in range(ROUNDS):  # pairs chosen by the estimate so far: a drifted start finds its loops in round 2
+    for k_round in range(ROUNDS):  # pairs chosen by the estimate so far: a drifted start finds its loops in round 2
         pairs.update(candidate_pairs(times[keys], estimate, hfov_deg))
         constraints = list(chain)
         for i, j in sorted(pairs):
@@ -370,7 +369,7 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, online: Rotati
             if found is not None and (found[0].inv() * estimate[i].inv() * estimate[j]).magnitude() < gate:
                 constraints.append((i, j, found[0], found[1]))
         estimate, cost_before, after, _ = solve(estimate, constraints, prior, prior_sigma, intervals, chain_sigma,
-                                                theta_sigma, near=round > 0)
+                                                theta_sigma, near=k_round > 0)
         before = before or cost_before
     used = len(constraints) - len(chain)
     return Refinement(interpolate(times, keys, estimate, imu), keys, used, len(pairs), before, after)
