@@ -185,10 +185,9 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
                              seconds_online, seconds_online)
     # The refined pass: every keyframe orientation at once, then the frames accumulated again with them.
     gyro = rec.imu["gyroscope"]
-    refinement = refine(times, np.array(sorted(metered_small)), uncorrected, online, metered_small.__getitem__,
+    refinement = refine(times, np.array(sorted(metered_small)), uncorrected, metered_small.__getitem__,
                         scenario.device.camera.hfov_deg, camera, gyro_noise,
-                        scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))),
-                        aligned)
+                        scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))))
     accumulator = ProbeAccumulator(settings.size, camera, falloff, levels=len(exposure_levels))
     with ThreadPoolExecutor(2) as readers:
         for k, codes in enumerate(readers.map(read_frame, files)):

@@ -22,10 +22,11 @@ from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation, Slerp
 
-from arsim.capture.align import MIN_INLIERS, robust_rotation, scaled_camera
+from arsim.capture.align import MIN_INLIERS, robust_rotation, scaled_camera, sift_detector
 from arsim.core.conventions import CameraIntrinsics
 
 KEY_DEG = 5.0  # a metered frame becomes a keyframe once the view has turned this far from the last one
+KEY_S = 1.0  # or once this long has passed (the gyroscope's drift between keyframes stays small)
 PAIR_OVERLAP = 0.6  # keyframes are matched when their optical axes are within this fraction of the hfov
 MAX_PAIRS = 6  # per keyframe, the nearest in angle taken close in time, and as many taken apart
 LOOP_S = 3.0  # keyframes taken further apart than this in time are loop-closure candidates
@@ -33,9 +34,7 @@ MIN_PAIR_INLIERS = 12  # a loop closure needs this many agreeing matches
 PAIR_FLOOR_DEG = 0.05  # a pair's rotation is known no better than this (measured: 0.05-0.08 degrees median error)
 PAIR_GATE_DEG = 1.0  # a pair disagreeing with the estimate's relative rotation by more (and the gyroscope's
 # possible drift between the two) is a false match
-PRIOR_REACH_S = 1.0  # the online orientations are priors within this of an online alignment that succeeded
 ROUNDS = 2
-ONLINE_SIGMA_DEG = 3.0  # the online pass's orientations, as weak priors (0.3: 0.25 deg RMS on the default sweep, 1: 0.23, 3: 0.23)
 LOSS_SCALE = 3.0  # residuals (in standard deviations) beyond which the Cauchy loss stops trusting a constraint
 
 
@@ -136,6 +135,7 @@ class Refinement:
     pairs_tried: int
     cost_before: float
     cost_after: float
+    calibration: np.ndarray  # (CALIBRATION,) the gyroscope's estimated corrections (zeros without its stream)
 
 
 class KeyframeFeatures:
@@ -144,7 +144,7 @@ class KeyframeFeatures:
 
     def __init__(self, camera: CameraIntrinsics):
         self.camera = scaled_camera(camera)
-        self.sift = cv2.SIFT_create(nfeatures=800, contrastThreshold=0.01)
+        self.sift = sift_detector()
         self.clahe = cv2.createCLAHE(clipLimit=6.0, tileGridSize=(4, 4))
 
     def small(self, codes: np.ndarray) -> np.ndarray:
@@ -181,14 +181,17 @@ def match_pair(a: Keyframe, b: Keyframe, rng: np.random.Generator) -> tuple[Rota
     return Rotation.from_matrix(q), max(spread / np.sqrt(n), np.radians(PAIR_FLOOR_DEG)), n
 
 
-def select_keyframes(metered: np.ndarray, orientations: Rotation) -> np.ndarray:
-    """Metered frames (indices, in order) taken as keyframes: the first, then each one that has turned
-    KEY_DEG from the last keyframe."""
+def select_keyframes(metered: np.ndarray, orientations: Rotation, times: np.ndarray) -> np.ndarray:
+    """Metered frames (indices, in order) taken as keyframes: the first, each one that has turned KEY_DEG
+    from the last keyframe (the whole rotation: near the sweep's poles the view turns about its own axis
+    while the axis hardly moves), or was taken KEY_S after it, and the last."""
     keys = [int(metered[0])]
-    axes = orientations.apply([0.0, 0.0, 1.0])
     for k in metered[1:]:
-        if np.degrees(np.arccos(np.clip(axes[k] @ axes[keys[-1]], -1, 1))) >= KEY_DEG:
+        if ((orientations[keys[-1]].inv() * orientations[k]).magnitude() >= np.radians(KEY_DEG)
+                or times[k] - times[keys[-1]] >= KEY_S):
             keys.append(int(k))
+    if keys[-1] != int(metered[-1]):
+        keys.append(int(metered[-1]))
     return np.array(keys)
 
 
@@ -273,13 +276,14 @@ def _jacobian(x, initial, ii, jj, q_inv, inv_sigma, prior_inv, prior_inv_sigma, 
 
 def solve(initial: Rotation, constraints: list[tuple[int, int, Rotation, float]], prior: Rotation | None = None,
           prior_sigma: np.ndarray | None = None, gyro: GyroIntervals | None = None, gyro_sigma: np.ndarray | None = None,
-          theta_sigma: np.ndarray | None = None, near: bool = False) -> tuple[Rotation, float, float, np.ndarray]:
+          theta_sigma: np.ndarray | None = None, near: bool = False,
+          theta0: np.ndarray | None = None) -> tuple[Rotation, float, float, np.ndarray]:
     """The keyframe orientations minimising the robust sum over constraints (i, j, Q, sigma) of
     |rotvec(Q⁻¹ R_i⁻¹ R_j)|² / sigma² and over keyframes of |rotvec(P_k⁻¹ R_k)|² / sigma_k² (prior P, where
     given; sigma inf: none), keyframe 0 held; with gyro, also the chain of the gyroscope's relative rotations
     (gyro_sigma each) under a calibration estimated with them (prior 0, theta_sigma). Returns the
-    orientations, the cost before and after, and the calibration (zeros without gyro). near: the start is
-    close already (a second round), the soft-L1 stage is skipped."""
+    orientations, the cost before and after, and the calibration (zeros without gyro; theta0: where it
+    starts). near: the start is close already (a later round), the soft-L1 stage is skipped."""
     m = len(initial)
     if m < 2:
         return initial, 0.0, 0.0, np.zeros(CALIBRATION)
@@ -295,6 +299,8 @@ def solve(initial: Rotation, constraints: list[tuple[int, int, Rotation, float]]
             None if not calibrated else 1.0 / np.asarray(theta_sigma, dtype=np.float64))
     n_vars = 3 * (m - 1) + (CALIBRATION if calibrated else 0)
     x0 = np.zeros(n_vars)
+    if calibrated and theta0 is not None:
+        x0[3 * (m - 1):] = theta0
     # Soft-L1 first (convex enough to pull a drifted start in), then Cauchy from there: its influence falls
     # off with the residual, so a false loop closure is all but ignored (started far off, it would stall).
     x1 = x0 if near else least_squares(_residuals, x0, jac=_jacobian, args=args, loss="soft_l1", f_scale=LOSS_SCALE,
@@ -318,58 +324,87 @@ def interpolate(times: np.ndarray, keys: np.ndarray, refined_keys: Rotation, imu
     return Slerp(times[keys], corrections)(t) * imu
 
 
-def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, online: Rotation, frames, hfov_deg: float,
-           camera: CameraIntrinsics, gyro: GyroNoise, seed: int = 0, gyro_stream: tuple | None = None,
-           aligned: np.ndarray | None = None) -> Refinement:
+def calibrate_gyroscope(intervals: GyroIntervals, constraints: list[tuple[int, int, Rotation, float]],
+                        key_t: np.ndarray, gyro: GyroNoise, theta_sigma: np.ndarray) -> np.ndarray:
+    """The gyroscope's calibration (CALIBRATION,) that makes its chain between keyframes agree with the
+    feature pairs (i, j, Q, sigma) taken close in time (each pair against the chain's product from i to j,
+    within the pair's and the calibrated chain's uncertainty); robust (soft-L1), the calibration's prior 0."""
+    ii = np.array([c[0] for c in constraints], dtype=int)
+    jj = np.array([c[1] for c in constraints], dtype=int)
+    q_inv = Rotation.concatenate([c[2] for c in constraints]).inv()
+    sigma = np.array([np.hypot(c[3], gyro.sigma(key_t[c[1]] - key_t[c[0]], 0.0, calibrated=True)) for c in constraints])
+
+    def residuals(theta):
+        turns = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.at(theta))])
+        r = (q_inv * turns[ii].inv() * turns[jj]).as_rotvec() / sigma[:, None]
+        return np.concatenate([r.ravel(), theta / theta_sigma])
+
+    return least_squares(residuals, np.zeros(CALIBRATION), loss="soft_l1", f_scale=LOSS_SCALE, x_scale=theta_sigma,
+                         method="trf", max_nfev=100).x
+
+
+def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_deg: float,
+           camera: CameraIntrinsics, gyro: GyroNoise, seed: int = 0, gyro_stream: tuple | None = None) -> Refinement:
     """Refined orientations of every frame. times (K,): seconds; metered: indices of the frames taken at the
-    metered exposure (the ones matched); imu: the IMU's camera-to-world orientations (K,); online: the
-    online pass's (candidate pairs, initial values and, near its successful alignments (aligned (K,) bool),
-    weak priors); frames(k): frame k's 8-bit codes; gyro_stream: (t_ns, omega, camera-to-device mount) of
-    the raw gyroscope, whose relative rotations between keyframes are then the chain, with its calibration
-    estimated (else the fused orientation's, uncalibrated)."""
-    keys = select_keyframes(metered, online)
+    metered exposure (the ones matched); imu: the IMU's camera-to-world orientations (K,); frames(k): frame
+    k's 8-bit codes; gyro_stream: (t_ns, omega, camera-to-device mount) of the raw gyroscope, whose relative
+    rotations between keyframes are then the chain, calibrated (else the fused orientation's, uncalibrated).
+
+    In three steps: the gyroscope calibrated against the pairs taken close in time (matched and gated
+    against the raw gyroscope, which drifts little over a few seconds), so that its chain alone starts
+    within a fraction of a degree everywhere (a drifted start would gate the true loop closures out);
+    the loop closures found and gated against that start; then the joint solve, twice."""
+    keys = select_keyframes(metered, imu, times)
+    key_t = times[keys]
     features = KeyframeFeatures(camera)  # (frames(k) may give the frame at features.small's size already)
     keyframes = [features(int(k), frames(int(k))) for k in keys]
     rng = np.random.default_rng(seed)
-    chain: list[tuple[int, int, Rotation, float]] = []
-    dts = np.diff(times[keys])
-    intervals, chain_sigma, theta_sigma = None, None, None
-    if gyro_stream is not None and len(keys) > 1:
-        intervals = GyroIntervals.of(gyro_stream[0], gyro_stream[1], times[keys], gyro_stream[2])
-        # calibrated, the chain is as good as the gyroscope's noise and the bias's wander
-        chain_sigma = np.array([gyro.sigma(dt, 0.0, calibrated=True) for dt in dts])
-        theta_sigma = np.concatenate([np.full(9, max(gyro.scale_factor, 1e-4)), np.full(3, max(gyro.bias, 1e-5))])
-    else:
-        for i in range(len(keys) - 1):
-            q = imu[keys[i]].inv() * imu[keys[i + 1]]
-            chain.append((i, i + 1, q, gyro.sigma(dts[i], q.magnitude())))
-    # Priors from the online pass only where it had just aligned (a pass that failed, a gyroscope drifting
-    # faster than its gate, holds nothing).
-    near = np.zeros(len(keys), dtype=bool)
-    if aligned is not None and aligned.any():
-        aligned_t = times[np.flatnonzero(aligned)]
-        gap = np.abs(times[keys][:, None] - aligned_t[None, :]).min(axis=1)
-        near = gap <= PRIOR_REACH_S
-    prior_sigma = np.where(near, np.radians(ONLINE_SIGMA_DEG), np.inf)
-    # Start from the online orientations moved so that keyframe 0 is the IMU's (the gauge).
-    estimate = imu[keys[0]] * online[keys[0]].inv() * online[keys]
-    prior = estimate
     matched: dict[tuple[int, int], tuple[Rotation, float, int] | None] = {}
-    pairs: set[tuple[int, int]] = set()
-    before = after = 0.0
-    for k_round in range(ROUNDS):  # pairs chosen by the estimate so far: a drifted start finds its loops in round 2
-        pairs.update(candidate_pairs(times[keys], estimate, hfov_deg))
-        constraints = list(chain)
+
+    def pairs_within(pairs, expected: Rotation, gate) -> list[tuple[int, int, Rotation, float]]:
+        """The matched pairs agreeing with the expected orientations (per keyframe) within gate(dt, angle) (rad)."""
+        out = []
         for i, j in sorted(pairs):
             if (i, j) not in matched:
                 matched[(i, j)] = match_pair(keyframes[i], keyframes[j], rng)
             found = matched[(i, j)]
-            # a pair far from what the estimate says (more than the gyroscope can drift between the two) is false
-            gate = np.radians(PAIR_GATE_DEG) + 3 * gyro.bias * abs(times[keys[j]] - times[keys[i]])
-            if found is not None and (found[0].inv() * estimate[i].inv() * estimate[j]).magnitude() < gate:
-                constraints.append((i, j, found[0], found[1]))
-        estimate, cost_before, after, _ = solve(estimate, constraints, prior, prior_sigma, intervals, chain_sigma,
-                                                theta_sigma, near=k_round > 0)
+            if found is None:
+                continue
+            q = expected[i].inv() * expected[j]
+            if (found[0].inv() * q).magnitude() < gate(key_t[j] - key_t[i], q.magnitude()):
+                out.append((i, j, found[0], found[1]))
+        return out
+
+    dts = np.diff(key_t)
+    chain: list[tuple[int, int, Rotation, float]] = []
+    intervals, chain_sigma, theta_sigma = None, None, None
+    theta = np.zeros(CALIBRATION)
+    start = imu[keys[0]].inv() * imu[keys]  # each keyframe's rotation from the first, camera axes
+    if gyro_stream is not None and len(keys) > 1:
+        intervals = GyroIntervals.of(gyro_stream[0], gyro_stream[1], key_t, gyro_stream[2])
+        chain_sigma = np.array([gyro.sigma(dt, 0.0, calibrated=True) for dt in dts])
+        theta_sigma = np.concatenate([np.full(9, max(gyro.scale_factor, 1e-4)), np.full(3, max(gyro.bias, 1e-5))])
+        raw = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.rotations)])
+        near = [p for p in candidate_pairs(key_t, raw, hfov_deg) if key_t[p[1]] - key_t[p[0]] <= LOOP_S]
+        # a pair further from the raw gyroscope than it can be off over the time between is a false match
+        found = pairs_within(near, raw, lambda dt, angle: np.radians(PAIR_GATE_DEG) + 3 * gyro.sigma(dt, angle))
+        if found:
+            theta = calibrate_gyroscope(intervals, found, key_t, gyro, theta_sigma)
+        start = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.at(theta))])
+    else:
+        for i in range(len(keys) - 1):
+            q = start[i].inv() * start[i + 1]
+            chain.append((i, i + 1, q, gyro.sigma(dts[i], q.magnitude())))
+    estimate = imu[keys[0]] * start  # keyframe 0 holds the gauge: the IMU's orientation there
+    pairs: set[tuple[int, int]] = set()
+    before = after = 0.0
+    for k_round in range(ROUNDS):  # pairs chosen by the estimate so far: the second round finds what the first moved into view
+        pairs.update(candidate_pairs(key_t, estimate, hfov_deg))
+        # a pair further from the estimate than its chain can drift over the time between is a false match
+        constraints = chain + pairs_within(pairs, estimate, lambda dt, angle: np.radians(PAIR_GATE_DEG)
+                                           + 3 * gyro.sigma(dt, angle, calibrated=intervals is not None))
+        estimate, cost_before, after, theta = solve(estimate, constraints, None, None, intervals, chain_sigma,
+                                                    theta_sigma, near=k_round > 0, theta0=theta)
         before = before or cost_before
     used = len(constraints) - len(chain)
-    return Refinement(interpolate(times, keys, estimate, imu), keys, used, len(pairs), before, after)
+    return Refinement(interpolate(times, keys, estimate, imu), keys, used, len(pairs), before, after, theta)
