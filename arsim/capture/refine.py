@@ -26,6 +26,7 @@ from arsim.capture.align import MIN_INLIERS, robust_rotation, scaled_camera, sif
 from arsim.core.conventions import CameraIntrinsics
 
 KEY_DEG = 5.0  # a metered frame becomes a keyframe once the view has turned this far from the last one
+KEY_SCALE = 0.25  # features at this fraction of the frame size
 KEY_S = 1.0  # or once this long has passed (the gyroscope's drift between keyframes stays small)
 PAIR_OVERLAP = 0.6  # keyframes are matched when their optical axes are within this fraction of the hfov
 MAX_PAIRS = 6  # per keyframe, the nearest in angle taken close in time, and as many taken apart
@@ -45,11 +46,19 @@ class GyroNoise:
     noise_density: float  # rad/s/sqrt(Hz)
     bias: float  # rad/s: the turn-on bias and the bias instability together
     scale_factor: float  # relative
+    misalignment: float = 0.0  # rad: each cross-axis term
 
     @classmethod
     def of(cls, gyroscope) -> GyroNoise:
         """From a scenario's [device.gyroscope] section."""
-        return cls(gyroscope.noise_density, gyroscope.turn_on_bias + gyroscope.bias_instability, gyroscope.scale_factor)
+        return cls(gyroscope.noise_density, gyroscope.turn_on_bias + gyroscope.bias_instability, gyroscope.scale_factor,
+                   gyroscope.misalignment_rad)
+
+    def calibration_sigma(self) -> np.ndarray:
+        """The calibration's prior standard deviations (CALIBRATION,): D's diagonal the scale factors, its
+        other terms the misalignments, b the bias."""
+        d = np.where(np.eye(3, dtype=bool), self.scale_factor, self.misalignment).ravel()
+        return np.concatenate([np.maximum(d, 1e-4), np.full(3, max(self.bias, 1e-5))])
 
     def sigma(self, dt: float, angle: float, calibrated: bool = False) -> float:
         """Standard deviation (rad, per axis) of the integrated relative rotation over dt seconds in which the
@@ -143,7 +152,7 @@ class KeyframeFeatures:
     equalised first; bearings unprojected through the camera."""
 
     def __init__(self, camera: CameraIntrinsics):
-        self.camera = scaled_camera(camera)
+        self.camera = scaled_camera(camera, KEY_SCALE)
         self.sift = sift_detector()
         self.clahe = cv2.createCLAHE(clipLimit=6.0, tileGridSize=(4, 4))
 
@@ -383,7 +392,7 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
     if gyro_stream is not None and len(keys) > 1:
         intervals = GyroIntervals.of(gyro_stream[0], gyro_stream[1], key_t, gyro_stream[2])
         chain_sigma = np.array([gyro.sigma(dt, 0.0, calibrated=True) for dt in dts])
-        theta_sigma = np.concatenate([np.full(9, max(gyro.scale_factor, 1e-4)), np.full(3, max(gyro.bias, 1e-5))])
+        theta_sigma = gyro.calibration_sigma()
         raw = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.rotations)])
         near = [p for p in candidate_pairs(key_t, raw, hfov_deg) if key_t[p[1]] - key_t[p[0]] <= LOOP_S]
         # a pair further from the raw gyroscope than it can be off over the time between is a false match
