@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
-from arsim.capture.response import response_error
+from arsim.capture.pipeline import CaptureSettings, accumulate_frames, capture, recording_scenario
+from arsim.capture.response import RecoveredResponse, response_error
 from arsim.core.assets import assets_dir, scenarios_dir
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
 from arsim.core.progress import progress_bar
-from arsim.evaluate.capture_report import capture_metrics
+from arsim.evaluate.capture_report import capture_metrics, probe_map_errors
 from arsim.scenario.environment import load_environment
 from arsim.scenario.loader import parse_scenario
 from arsim.sensors.camera import ResponseCurve
@@ -44,6 +44,9 @@ COLUMNS = (("orientation RMS corrected (deg)", "orientation_rms_deg_corrected", 
            ("irradiance err %", "irradiance_mean_err_pct", 2),
            ("s=80 err %", "reflection_s80_mean_err_pct", 2),
            ("brightest source ratio", "brightest_source_ratio", 3),
+           ("true response irradiance err %", "true_response_irradiance_err_pct", 2),
+           ("ideal merge irradiance err %", "ideal_irradiance_err_pct", 2),
+           ("ideal merge s=80 err %", "ideal_s80_err_pct", 2),
            ("frames/s", "frames_per_second", 1))
 
 
@@ -87,6 +90,13 @@ def run_case(text: str, work: Path) -> dict:
     true_response = ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
     truth = load_environment(dataclasses.replace(sc.environment, probe_size=settings.size))
     metrics, _ = capture_metrics(result, truth, response_error(result.response, true_response))
+    # The causes: the same frames merged at the capture's orientations with the true response, and the
+    # floor: at the true orientations with the true response (the ideal merge)
+    exact = RecoveredResponse(np.repeat(true_response[:, None], 3, axis=1))
+    responded, _ = probe_map_errors(accumulate_frames(rec, result.corrected, exact, settings.size), truth)
+    metrics["true_response_irradiance_err_pct"] = responded[0].mean_percent
+    floor, _ = probe_map_errors(accumulate_frames(rec, result.truth, exact, settings.size), truth)
+    metrics["ideal_irradiance_err_pct"], metrics["ideal_s80_err_pct"] = floor[0].mean_percent, floor[1].mean_percent
     return {"status": "ok", "seconds": time.perf_counter() - start, **{k: metrics[k] for _, k, _ in COLUMNS}}
 
 

@@ -123,6 +123,33 @@ def _check_overlap(rec: Recording, orientations: Rotation, camera) -> None:
                          "frames per second or a slower sweep")
 
 
+def exposure_scales(rec: Recording, sensor: SensorSettings) -> list[float]:
+    """Each frame's exposure (time x ISO / base ISO x the sensor's sensitivity): radiance x this is what its
+    codes encode."""
+    return [f["exposure_ns"] / 1e9 * f["iso"] / sensor.base_iso * sensor.sensitivity for f in rec.frames]
+
+
+def accumulate_frames(rec: Recording, orientations: Rotation, response: RecoveredResponse, size: int,
+                      progress: Callable[[float, float], None] = lambda fraction, coverage: None) -> ProbeAccumulator:
+    """Every frame of the recording accumulated into a size x size angle map at the given camera-to-world
+    orientations (K,), linearised with the response: the refined pass, or (true orientations, true
+    response) the ideal merge that bounds what any capture of the same frames can do."""
+    scenario = recording_scenario(rec)
+    bracket = scenario.capture.bracket_ev
+    sensor = SensorSettings.of(scenario.device.camera)
+    camera = recording_camera(rec)
+    levels = sorted(set(bracket), reverse=True)
+    accumulator = ProbeAccumulator(size, camera, vignette(camera.height, camera.width, sensor.vignetting), levels=len(levels))
+    files, scales = [rec.folder / f["file"] for f in rec.frames], exposure_scales(rec, sensor)
+    with ThreadPoolExecutor(2) as readers:
+        for k, codes in enumerate(readers.map(read_frame, files)):
+            accumulator.add(codes, response.linear / scales[k], orientations[k].as_matrix(), scales[k]**2,
+                            levels.index(bracket[k % len(bracket)]))
+            if k % 30 == 0 or k == len(rec.frames) - 1:
+                progress((k + 1) / len(rec.frames), accumulator.coverage())
+    return accumulator
+
+
 def capture(rec: Recording, settings: CaptureSettings | None = None,
             progress: Callable[[float, float], None] = lambda fraction, coverage: None) -> CaptureResult:
     """Run the capture on a recording (settings: the recording's scenario's unless given);
@@ -151,7 +178,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     features = KeyframeFeatures(camera)
     metered_small: dict[int, np.ndarray] = {}  # what the refinement's keyframes are taken from
     files = [rec.folder / f["file"] for f in rec.frames]
-    scales = [f["exposure_ns"] / 1e9 * f["iso"] / sensor.base_iso * sensor.sensitivity for f in rec.frames]
+    scales = exposure_scales(rec, sensor)
     with ThreadPoolExecutor(2) as readers:  # PNG decoding releases the GIL: read ahead
         for k, (info, codes) in enumerate(zip(rec.frames, readers.map(read_frame, files))):
             any_unclipped |= bool(np.any(codes < 255))
@@ -188,12 +215,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     refinement = refine(times, np.array(sorted(metered_small)), uncorrected, metered_small.__getitem__,
                         scenario.device.camera.hfov_deg, camera, gyro_noise,
                         scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))))
-    accumulator = ProbeAccumulator(settings.size, camera, falloff, levels=len(exposure_levels))
-    with ThreadPoolExecutor(2) as readers:
-        for k, codes in enumerate(readers.map(read_frame, files)):
-            accumulator.add(codes, response.linear / scales[k], refinement.orientations[k].as_matrix(), scales[k]**2,
-                            exposure_levels.index(bracket[k % len(bracket)]))
-            if k % 30 == 0 or k == len(rec.frames) - 1:
-                progress(0.6 + 0.4 * (k + 1) / len(rec.frames), accumulator.coverage())
+    accumulator = accumulate_frames(rec, refinement.orientations, response, settings.size,
+                                    lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage))
     return CaptureResult(accumulator, response, times, truth, uncorrected, refinement.orientations, online, aligned,
                          time.perf_counter() - start, seconds_online, refinement)

@@ -14,6 +14,7 @@ correction times the IMU's orientation of the frame.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import cv2
@@ -145,6 +146,7 @@ class Refinement:
     cost_before: float
     cost_after: float
     calibration: np.ndarray  # (CALIBRATION,) the gyroscope's estimated corrections (zeros without its stream)
+    seconds: float = 0.0  # features, matching and the solve (not the accumulation again)
 
 
 class KeyframeFeatures:
@@ -363,6 +365,7 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
     against the raw gyroscope, which drifts little over a few seconds), so that its chain alone starts
     within a fraction of a degree everywhere (a drifted start would gate the true loop closures out);
     the loop closures found and gated against that start; then the joint solve, twice."""
+    began = time.perf_counter()
     keys = select_keyframes(metered, imu, times)
     key_t = times[keys]
     features = KeyframeFeatures(camera)  # (frames(k) may give the frame at features.small's size already)
@@ -397,9 +400,9 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         near = [p for p in candidate_pairs(key_t, raw, hfov_deg) if key_t[p[1]] - key_t[p[0]] <= LOOP_S]
         # a pair further from the raw gyroscope than it can be off over the time between is a false match
         found = pairs_within(near, raw, lambda dt, angle: np.radians(PAIR_GATE_DEG) + 3 * gyro.sigma(dt, angle))
-        if found:
+        if found:  # (without any, the fused orientation stays the start: its gravity corrections hold the tilt)
             theta = calibrate_gyroscope(intervals, found, key_t, gyro, theta_sigma)
-        start = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.at(theta))])
+            start = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.at(theta))])
     else:
         for i in range(len(keys) - 1):
             q = start[i].inv() * start[i + 1]
@@ -412,8 +415,11 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         # a pair further from the estimate than its chain can drift over the time between is a false match
         constraints = chain + pairs_within(pairs, estimate, lambda dt, angle: np.radians(PAIR_GATE_DEG)
                                            + 3 * gyro.sigma(dt, angle, calibrated=intervals is not None))
+        if len(constraints) == len(chain):  # no pair at all: nothing to refine against
+            break
         estimate, cost_before, after, theta = solve(estimate, constraints, None, None, intervals, chain_sigma,
                                                     theta_sigma, near=k_round > 0, theta0=theta)
         before = before or cost_before
-    used = len(constraints) - len(chain)
-    return Refinement(interpolate(times, keys, estimate, imu), keys, used, len(pairs), before, after, theta)
+    used = len(constraints) - len(chain)  # (keyframe 0 was held: estimate[0] is the IMU's in every case)
+    return Refinement(interpolate(times, keys, estimate, imu), keys, used, len(pairs), before, after, theta,
+                      time.perf_counter() - began)

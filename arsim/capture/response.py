@@ -10,9 +10,10 @@ import numpy as np
 
 from arsim.core.errors import ArsimError
 
-# Codes whose recovered value sets the scale: well exposed in a burst, near the top where the curve
-# is known to end (code 255 is full scale for every 8-bit display-referred response).
-SCALE_FIT_CODES = np.arange(200, 251)
+# Codes whose recovered value sets the scale: near the top where the curve is known to end (code 255 is
+# full scale for every 8-bit display-referred response), as close to it as the medians reach (200-250 left
+# every probe of the matrix's normal cases about 1 % too bright: a longer extrapolation over the shoulder).
+SCALE_FIT_CODES = np.arange(225, 255)
 ERROR_CODES = np.arange(5, 251)  # where the error is reported: codes 0-4 are noise, 251-255 clip
 
 
@@ -56,7 +57,53 @@ def calibrate_response(frames: list[np.ndarray], exposure_products: np.ndarray) 
     # Robertson's three, whose differences are noise; it sets the scale within about 1 %, each alone 3-5 %.
     with np.errstate(all="ignore"):
         mean = np.exp(np.log(curve[:, 0, :].astype(np.float64)).mean(axis=1))
-    return RecoveredResponse(np.repeat(_fill_and_scale(mean)[:, None], 3, axis=1))
+    linear = _fill_and_scale(_by_median_codes(frames, np.asarray(exposure_products, dtype=np.float64), _fill_and_scale(mean)))
+    return RecoveredResponse(np.repeat(linear[:, None], 3, axis=1))
+
+
+SHAPE_CODES = (20, 200)  # where Robertson's curve holds its shape under noise: each pixel's exposure is read there
+MEDIAN_SAMPLES = 400  # samples per exposure bin of the median code
+MEDIAN_PIXELS = 200_000  # pixel-channels of the burst used (evenly spaced)
+
+
+def _by_median_codes(frames: list[np.ndarray], products: np.ndarray, linear: np.ndarray) -> np.ndarray:
+    """The curve read the other way round. Robertson's value for a code is the mean exposure of the pixels
+    that show it; under noise, where few pixels are brighter (the top codes of a dim burst), more of those
+    are dimmer pixels pushed up than brighter ones pushed down, so the top codes come out too low, and the
+    scale, set there, too high (a dim night: every code 30 % too bright). Here each pixel's exposure is read
+    from its mid codes (SHAPE_CODES, where the curve's shape holds), and each code's value is the exposure
+    at which that code is the median code shown: the median passes through the monotone curve, the noise
+    and the clipping at 0 and 255 unchanged. Codes without enough samples keep Robertson's values."""
+    stack = np.stack([f.reshape(-1) for f in frames])  # (J, P) codes, channels flattened
+    step = max(1, stack.shape[1] // MEDIAN_PIXELS)
+    codes = stack[:, ::step].astype(np.int64)
+    lo, hi = SHAPE_CODES
+    use = (codes >= lo) & (codes <= hi)
+    with np.errstate(all="ignore"):
+        exposure = np.sum(np.where(use, linear[codes] / products[:, None], 0.0), axis=0) / use.sum(axis=0)
+    seen = use.any(axis=0)
+    x = (exposure[seen][None, :] * products[:, None]).ravel()  # each sample's exposure (relative)
+    z = codes[:, seen].ravel()
+    if len(x) < 4 * MEDIAN_SAMPLES:
+        return linear
+    order = np.argsort(x)
+    x, z = x[order], z[order]
+    n_bins = len(x) // MEDIAN_SAMPLES
+    xb = np.array([np.median(part) for part in np.array_split(x, n_bins)])
+    # the median code with the codes spread evenly over their unit widths (a continuous median)
+    zb = np.empty(n_bins)
+    for k, part in enumerate(np.array_split(z, n_bins)):
+        counts = np.bincount(part, minlength=256).astype(np.float64)
+        cdf = np.cumsum(counts) / counts.sum()
+        c = int(np.searchsorted(cdf, 0.5))
+        below = cdf[c - 1] if c > 0 else 0.0
+        zb[k] = c - 0.5 + (0.5 - below) / max(counts[c] / counts.sum(), 1e-12)
+    zb = np.maximum.accumulate(zb)
+    out = linear.copy()
+    target = np.arange(1, 255)
+    inside = (target > zb[0]) & (target < zb[-1])
+    out[target[inside]] = np.exp(np.interp(target[inside], zb, np.log(xb)))
+    return np.maximum.accumulate(out)
 
 
 def response_error(recovered: RecoveredResponse, true_linear: np.ndarray) -> dict:

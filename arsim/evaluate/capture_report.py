@@ -43,6 +43,15 @@ def filled(probe: np.ndarray, covered: np.ndarray) -> np.ndarray:
     return out * anglemap_disk_mask(probe.shape[0])[..., None]
 
 
+def probe_map_errors(acc, truth: np.ndarray) -> tuple[list, np.ndarray]:
+    """The errors of the irradiance and reflection maps (MAP_EXPONENTS) of an accumulator's probe (holes
+    filled) against the truth's, and the filled probe."""
+    inside = anglemap_disk_mask(acc.size)
+    complete = filled(acc.probe(), acc.covered() & inside)
+    maps_probe, maps_truth = fast_maps(complete, MAP_EXPONENTS), fast_maps(truth, MAP_EXPONENTS)
+    return [map_error(maps_truth[k][inside], maps_probe[k][inside]) for k in range(len(MAP_EXPONENTS))], complete
+
+
 def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_error: dict) -> tuple[dict, np.ndarray]:
     """metrics.json's content and the probe with its holes filled."""
     acc = result.accumulator
@@ -52,9 +61,7 @@ def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_erro
     measured = covered & ~acc.clipped_only()
     eps = 1e-4 * truth[inside].mean()
     rel = np.abs(probe[measured] - truth[measured]) / (truth[measured] + eps)
-    complete = filled(probe, covered)
-    maps_probe, maps_truth = fast_maps(complete, MAP_EXPONENTS), fast_maps(truth, MAP_EXPONENTS)
-    map_err = [map_error(maps_truth[k][inside], maps_probe[k][inside]) for k in range(len(MAP_EXPONENTS))]
+    map_err, complete = probe_map_errors(acc, truth)
     corrected = orientation_errors_deg(result.corrected, result.truth)
     uncorrected = orientation_errors_deg(result.uncorrected, result.truth)
     online = orientation_errors_deg(result.online, result.truth)

@@ -76,16 +76,17 @@ def _write_png(path: Path, frame: np.ndarray) -> None:
 
 
 BURST_METERING_FRAMES = 8  # unrecorded frames the burst's auto-exposure takes to settle on its view
+# The codes the response's scale is fitted on (capture/response.py: SCALE_FIT_CODES): a burst none of whose
+# frames has this fraction of its pixels there cannot calibrate, and the app looks for a better view.
+BURST_UPPER_CODES, BURST_MIN_UPPER = (200, 250), 0.001
+BURST_CANDIDATES = 24  # views along the sweep the app tries when the first burst view is too dark
 
 
-def _write_burst(out_dir: Path, camera: CameraRenderer, view: Rotation, scenario: Scenario,
-                 response: ResponseCurve) -> list[tuple]:
-    """A bracketed burst of one view (before the sweep), as phones take for HDR: the auto-exposure settles on the view
-    first (unrecorded frames, no latency), then the frames step by burst_step around its exposure
-    (time first, then ISO, within the sensor's limits; shifted down where the top would pass them).
-    Returns the burst.csv rows."""
+def _burst_settings(camera: CameraRenderer, view: Rotation, scenario: Scenario, response: ResponseCurve) -> list[tuple]:
+    """The burst's (exposure_s, iso) for a view: the auto-exposure settles on the view first (unrecorded frames,
+    no latency), then the frames step by burst_step around its exposure (time first, then ISO, within the
+    sensor's limits; shifted down where the top would pass them)."""
     capture, sensor = scenario.capture, camera.sensor
-    (out_dir / "burst").mkdir(exist_ok=True)
     metering = AutoExposure(dataclasses.replace(sensor, latency_frames=0, convergence=1.0), response)
     for k in range(BURST_METERING_FRAMES):
         used = metering.next_frame_settings()
@@ -93,9 +94,33 @@ def _write_burst(out_dir: Path, camera: CameraRenderer, view: Rotation, scenario
     # The bracket is shifted, not cut, where it would pass the sensor's longest product: frames stay distinct.
     longest = sensor.exposure_range_s[1] * sensor.iso_range[1] / sensor.base_iso
     top = min(metering.product * capture.burst_step ** ((capture.burst_frames - 1) / 2), longest)
+    return [metering.settings(top / capture.burst_step ** (capture.burst_frames - 1 - k)) for k in range(capture.burst_frames)]
+
+
+def _reaches_upper_codes(frame: np.ndarray) -> float:
+    lo, hi = BURST_UPPER_CODES
+    return float(np.mean((frame >= lo) & (frame <= hi)))
+
+
+def _write_burst(out_dir: Path, camera: CameraRenderer, views: Rotation, scenario: Scenario,
+                 response: ResponseCurve) -> list[tuple]:
+    """A bracketed burst of one view (before the sweep), as phones take for HDR, of views[0]; where none of
+    that burst's frames reaches the upper codes (a dark room seen at the horizon: the response could not be
+    calibrated from it), of the view among views[1:] whose brightest burst frame has the most pixels there,
+    as an app that brackets until the codes span the range does. Returns the burst.csv rows."""
+    def upper(view, settings):
+        return max(_reaches_upper_codes(camera.capture(view, *used, noise_key(scenario.run.seed, "burst", 2000 + k)))
+                   for k, used in enumerate(settings[-3:]))
+
+    view, settings = views[0], _burst_settings(camera, views[0], scenario, response)
+    if len(views) > 1 and upper(view, settings) < BURST_MIN_UPPER:
+        tried = [(upper(v, s), k) for k, (v, s) in enumerate((v, _burst_settings(camera, v, scenario, response))
+                                                             for v in views[1:])]
+        best = max(tried)[1] + 1
+        view, settings = views[best], _burst_settings(camera, views[best], scenario, response)
+    (out_dir / "burst").mkdir(exist_ok=True)
     rows = []
-    for k in range(capture.burst_frames):
-        exposure, iso = metering.settings(top / capture.burst_step ** (capture.burst_frames - 1 - k))
+    for k, (exposure, iso) in enumerate(settings):
         frame = camera.capture(view, exposure, iso, noise_key(scenario.run.seed, "burst", k))
         name = f"burst/{k:02d}.png"
         _write_png(out_dir / name, frame)
@@ -195,9 +220,11 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     response = ResponseCurve(cam.response, cam.gamma, cam.contrast)
     renderer = CameraRenderer(probe, camera, sensor, response, table=segment.table)
     ae = AutoExposure(sensor, response)
-    # The burst looks where the sweep passes the horizon (mid-sweep): sky and ground, the widest range.
-    burst_view = trajectory.camera_orientation([trajectory.duration / 2], mount)[0]
-    burst_rows = (_write_burst(out_dir, renderer, burst_view, scenario, response)
+    # The burst looks where the sweep passes the horizon (mid-sweep): sky and ground, the widest range; other
+    # views along the sweep where that one is too dark.
+    candidates = np.concatenate([[trajectory.duration / 2], np.linspace(0.0, trajectory.duration, BURST_CANDIDATES)])
+    burst_views = trajectory.camera_orientation(candidates, mount)
+    burst_rows = (_write_burst(out_dir, renderer, burst_views, scenario, response)
                   if segment.burst else [])
     n_frames = frame_count(trajectory, cam.fps)
     rows = []
