@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from arsim.capture.refine import GyroNoise, interpolate, solve
+from arsim.capture.refine import CHAIN_FLOOR_DEG, GyroNoise, interpolate, solve
 
 
 def _spiral(m: int) -> Rotation:
@@ -61,4 +61,4 @@ def test_interpolation_carries_the_correction_between_keyframes():
 def test_gyro_noise_grows_with_time_and_turn():
     g = GyroNoise(noise_density=5e-5, bias=1e-3, scale_factor=5e-3)
     assert g.sigma(0.1, 0.1) < g.sigma(0.2, 0.1) < g.sigma(0.2, 0.5)
-    assert abs(g.sigma(1.0, 0.0) - np.sqrt(5e-5**2 + 1e-3**2 + np.radians(0.01) ** 2)) < 1e-12
+    assert abs(g.sigma(1.0, 0.0) - np.sqrt(5e-5**2 + 1e-3**2 + np.radians(CHAIN_FLOOR_DEG) ** 2)) < 1e-12
