@@ -4,7 +4,7 @@
 
 At 512² `accurate` costs N^4, so it is evaluated at --texels random disk texels plus the 14 x 14
 texels around the brightest texel (where narrow lobes are hardest); at 128² at every texel.
-Error per texel and channel |a - v| / (a + 1e-4 mean(a)), mean and max in percent (DESIGN.md 3).
+Error per texel and channel |a - v| / (a + 1e-4 mean(a)), mean and max in percent (README: Conventions).
 """
 
 import argparse

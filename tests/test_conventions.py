@@ -1,4 +1,4 @@
-"""The pinned conventions of DESIGN.md section 3: projections, their inverses, solid angles, cameras."""
+"""The pinned conventions (README: Conventions): projections, their inverses, solid angles, cameras."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The pinned conventions of arsim, in one place (DESIGN.md section 3).
+"""The pinned conventions of arsim, in one place (README: Conventions).
 
 World: right-handed, metres, +y up. Directions are unit 3-vectors in the last axis of an array.
 

@@ -1,4 +1,4 @@
-"""Error metrics of the thesis (eq. 6.1/6.2), as pinned in DESIGN.md section 3."""
+"""Error metrics of the thesis (eq. 6.1/6.2), as README's Conventions pin them."""
 
 from __future__ import annotations
 

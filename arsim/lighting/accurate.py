@@ -1,7 +1,7 @@
 """The accurate maps (thesis Alg. 4.1/4.2) and the bounds optimisation (section 6.2.2), in NumPy.
 
 For every output texel d of the disk: M_s(d) = sum_i L_i max(0, d.w_i)^s W_i / sum_i max(0, d.w_i)^s W_i,
-summed over every input texel i of the disk with its solid angle W_i (DESIGN.md section 3), accumulated
+summed over every input texel i of the disk with its solid angle W_i (README: Conventions), accumulated
 in float64. This is the reference all other methods are measured against. The sums use elementwise
 products and row reductions (no BLAS), so a texel's value does not depend on which other texels are
 computed with it: a tiled bake equals an untiled one bit for bit.

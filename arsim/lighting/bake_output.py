@@ -1,4 +1,4 @@
-"""A bake on disk (DESIGN.md section 4): irradiance.exr, reflection_s<S>.exr and bake.json in one folder."""
+"""A bake on disk (README: Irradiance and reflection maps): irradiance.exr, reflection_s<S>.exr and bake.json in one folder."""
 
 from __future__ import annotations
 

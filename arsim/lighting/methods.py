@@ -1,7 +1,7 @@
 """The map methods by name, their parameters, and a timed bake of several exponents at once.
 
 Every method takes an N x N angle map and Phong exponents and returns one float32 angle map per
-exponent (E, N, N, 3): s = 1 is the irradiance map (E / pi), s > 1 reflection maps (DESIGN.md 3).
+exponent (E, N, N, 3): s = 1 is the irradiance map (E / pi), s > 1 reflection maps (README: Conventions).
 """
 
 from __future__ import annotations

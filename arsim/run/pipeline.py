@@ -1,4 +1,4 @@
-"""`arsim run`: a scenario end to end into one run directory (DESIGN.md section 4): the recording (or a
+"""`arsim run`: a scenario end to end into one run directory (README: Runs end to end): the recording (or a
 recording replayed), the captured probe against the truth, the maps of every method the scenario names
 baked from the probe, the AR session's frames, its render-loop profile, the metrics of every stage, the
 report and manifest.json.

@@ -2,7 +2,7 @@
 
 Both are matte (Lambertian) and lit by the same environment as everything else, at infinity: their
 radiance is reflectance x M_1(+y), the environment's normalised cosine average over the upper
-hemisphere (DESIGN.md section 3; E/pi). Shadows and the lower hemisphere play no part for a surface
+hemisphere (README: Conventions; E/pi). Shadows and the lower hemisphere play no part for a surface
 facing up. The tag image follows the marker frame OpenCV's pose estimation uses: its x axis (image
 columns) along world +x, its image top towards world -z, its normal +y.
 """

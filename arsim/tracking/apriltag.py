@@ -7,7 +7,7 @@ and the tag farther away. On the default AR path the 95th percentile of the posi
 of the distance on the 8-bit codes and 0.5 % linearised; AprilTag's own corner refinement (edges
 fitted along the whole side) beats cornerSubPix's there (1.3 %).
 
-The tag lies on the table (DESIGN.md section 3): centred at the world origin, its x axis along world +x,
+The tag lies on the table (README: Conventions): centred at the world origin, its x axis along world +x,
 its image top towards world -z, its normal +y. IPPE_SQUARE wants the corners in the marker's own frame
 (x right, y up the tag image, z out of it), which is the world turned by MARKER_TO_WORLD.
 """

@@ -1,4 +1,4 @@
-// Angle-map coordinates (DESIGN.md section 3), shared by every shader that looks up an environment or a map.
+// Angle-map coordinates (README: Conventions), shared by every shader that looks up an environment or a map.
 
 const float PI = 3.14159265358979;
 
