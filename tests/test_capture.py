@@ -299,3 +299,31 @@ enabled = false
     assert metrics["alignments_succeeded"] == 0 and metrics["loop_closures"] == 0 and metrics["refined"]
     assert any("the IMU's alone" in w for w in metrics["warnings"]) and "the IMU's alone" in r.stderr
     assert abs(metrics["orientation_rms_deg_corrected"] - metrics["orientation_rms_deg_uncorrected"]) < 0.05
+
+
+def test_the_refinement_removes_an_injected_gyroscope_drift(tmp_path):
+    """A 20 s sweep of the interior with a gyroscope whose turn-on bias is 1 degree/s (a drift the truth
+    knows): the refined orientations against the IMU's. Measured: 0.13 degrees RMS refined, 2.64 uncorrected
+    (the online pass 2.78); a 60 s sweep with the same device: 0.21 refined, 15.7 uncorrected, 19.0 online."""
+    import json
+
+    (tmp_path / "drift.toml").write_text("""
+[run]
+seed = 3
+[environment]
+map = "envmaps/interior.exr"
+probe_size = 256
+[capture]
+duration_s = 20.0
+capture_size = 128
+[device.gyroscope]
+turn_on_bias = 0.0175
+[ar]
+enabled = false
+""")
+    r = arsim("capture", tmp_path / "drift.toml", "-o", tmp_path / "out")
+    assert r.returncode == 0, r.stderr
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert metrics["refined"] and metrics["loop_closures"] > 100
+    assert metrics["orientation_rms_deg_corrected"] < 0.2
+    assert metrics["orientation_rms_deg_uncorrected"] > 10 * metrics["orientation_rms_deg_corrected"]
