@@ -269,10 +269,18 @@ def test_unusable_recordings_are_refused(short_recording, tmp_path, damage, mess
     assert not (tmp_path / "out" / "env.exr").exists()
 
 
+def _capture_metrics(scenario, out):
+    """`arsim capture SCENARIO -o OUT` (recorded first): its metrics.json and the process."""
+    import json
+
+    r = arsim("capture", scenario, "-o", out)
+    assert r.returncode == 0, r.stderr
+    return json.loads((out / "metrics.json").read_text()), r
+
+
 def test_a_scene_without_features_falls_back_to_the_imu_and_says_so(tmp_path):
     """A sky-like gradient with nothing to match: no alignment, no keyframe pair; the orientations are the
     IMU's, and metrics.json says so."""
-    import json
 
     from arsim.core.conventions import equirect_directions
     from arsim.core.hdr_io import write_exr
@@ -293,9 +301,7 @@ fps = 10.0
 [ar]
 enabled = false
 """)
-    r = arsim("capture", tmp_path / "flat.toml", "-o", tmp_path / "out")
-    assert r.returncode == 0, r.stderr
-    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    metrics, r = _capture_metrics(tmp_path / "flat.toml", tmp_path / "out")
     assert metrics["alignments_succeeded"] == 0 and metrics["loop_closures"] == 0 and metrics["refined"]
     assert any("the IMU's alone" in w for w in metrics["warnings"]) and "the IMU's alone" in r.stderr
     assert abs(metrics["orientation_rms_deg_corrected"] - metrics["orientation_rms_deg_uncorrected"]) < 0.05
@@ -305,7 +311,6 @@ def test_the_refinement_removes_an_injected_gyroscope_drift(tmp_path):
     """A 20 s sweep of the interior with a gyroscope whose turn-on bias is 1 degree/s (a drift the truth
     knows): the refined orientations against the IMU's. Measured: 0.13 degrees RMS refined, 2.64 uncorrected
     (the online pass 2.78); a 60 s sweep with the same device: 0.21 refined, 15.7 uncorrected, 19.0 online."""
-    import json
 
     (tmp_path / "drift.toml").write_text("""
 [run]
@@ -321,9 +326,7 @@ turn_on_bias = 0.0175
 [ar]
 enabled = false
 """)
-    r = arsim("capture", tmp_path / "drift.toml", "-o", tmp_path / "out")
-    assert r.returncode == 0, r.stderr
-    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    metrics, _ = _capture_metrics(tmp_path / "drift.toml", tmp_path / "out")
     assert metrics["refined"] and metrics["loop_closures"] > 100
     assert metrics["orientation_rms_deg_corrected"] < 0.2
     assert metrics["orientation_rms_deg_uncorrected"] > 10 * metrics["orientation_rms_deg_corrected"]
