@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import shutil
 import sys
 import tempfile
@@ -125,13 +126,55 @@ def table(rows: dict[str, dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def plot(rows: dict[str, dict], path: Path) -> None:
+    """matrix.png: per case, the orientation error (refined, online pass, IMU alone) and the irradiance and
+    s = 80 errors against the ideal merge's (log scales: the cases span three decades)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    done = {name: r for name, r in rows.items() if r["status"] == "ok"}
+    if not done:
+        return
+    names, x = list(done), np.arange(len(done))
+    fig, axes = plt.subplots(2, 1, figsize=(max(8.0, 0.32 * len(names)), 7.5), sharex=True)
+    for offset, key, label in ((-0.27, "orientation_rms_deg_corrected", "refined"),
+                               (0.0, "orientation_rms_deg_online", "online pass"),
+                               (0.27, "orientation_rms_deg_uncorrected", "IMU alone")):
+        axes[0].bar(x + offset, [done[n][key] for n in names], 0.27, label=label)
+    axes[0].axhline(0.3, color="k", lw=0.8, ls="--", label="0.3°")
+    axes[0].set(yscale="log", ylabel="orientation RMS (degrees)")
+    for offset, key, label in ((-0.3, "irradiance_mean_err_pct", "irradiance"),
+                               (-0.1, "ideal_irradiance_err_pct", "irradiance, ideal merge"),
+                               (0.1, "reflection_s80_mean_err_pct", "s = 80"),
+                               (0.3, "ideal_s80_err_pct", "s = 80, ideal merge")):
+        axes[1].bar(x + offset, [max(done[n][key], 1e-3) for n in names], 0.2, label=label)
+    axes[1].set(yscale="log", ylabel="map mean error (%)")
+    axes[1].set_xticks(x, names, rotation=70, ha="right", fontsize=8)
+    for ax in axes:
+        ax.legend(fontsize=8, ncol=4)
+        ax.grid(axis="y", alpha=0.3)
+    fig.suptitle(f"Capture fidelity matrix: {len(done)} of {len(rows)} cases captured")
+    fig.tight_layout()
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog="example:\n  python benchmarks/capture_matrix.py -o matrix --quick")
-    parser.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="writes matrix.md and matrix.json")
+    parser.add_argument("-o", "--output", type=Path, required=True, metavar="DIR",
+                        help="writes matrix.md, matrix.json and matrix.png")
+    parser.add_argument("--plot-only", action="store_true", help="redraw matrix.png from DIR/matrix.json")
     parser.add_argument("--quick", action="store_true", help=f"only {', '.join(QUICK)}")
     parser.add_argument("--only", metavar="NAMES", help="comma-separated case names")
     args = parser.parse_args()
+    if args.plot_only:
+        plot(json.loads((args.output / "matrix.json").read_text(encoding="utf-8")), args.output / "matrix.png")
+        return 0
     every = cases()
     names = list(QUICK) if args.quick else (args.only.split(",") if args.only else list(every))
     unknown = [n for n in names if n not in every]
@@ -156,6 +199,7 @@ def main() -> int:
             write_text_atomic(args.output / "matrix.md", f"# Capture fidelity matrix\n\n{len(rows)} of {len(names)} "
                               "cases\n\n" + table(rows))
             write_text_atomic(args.output / "matrix.json", json_text(rows))
+    plot(rows, args.output / "matrix.png")
     print(table(rows))
     return 0
 
