@@ -1,10 +1,12 @@
 """The capture's fidelity over a matrix of cases: every bundled environment with three seeds, each at a quarter
 of its intensity (the dim case), the drifting gyroscope's device on three environments, a 20 s sweep, the
-night scene. Each case is recorded (the sweep only) and captured; one row per case, then the medians and
-the worst cases; the table as Markdown and JSON.
+night scene. Each case is recorded (the sweep only) and captured, then merged twice more from the same frames:
+at the capture's orientations with the true response (what the response costs) and at the true orientations
+with the true response (the ideal merge, the floor the camera's noise leaves). One row per case, then the
+medians and the worst cases; the table as Markdown and JSON, and matrix.png.
 
-    python benchmarks/capture_matrix.py -o matrix            # every case (37): about 50 minutes on 2 cores
-    python benchmarks/capture_matrix.py -o matrix --quick    # 4 cases: about 6 minutes
+    python benchmarks/capture_matrix.py -o matrix            # every case (37): about 60-70 minutes on 2 cores
+    python benchmarks/capture_matrix.py -o matrix --quick    # 4 cases: about 7 minutes
     python benchmarks/capture_matrix.py -o matrix --only night,dim-city
 """
 
