@@ -2,10 +2,10 @@
 ray distances): keyframes along the sweep, features matched between every pair of keyframes whose views
 overlap (the neighbouring turns of the spiral as well as the next keyframe: loop closures), each pair's
 relative rotation from its matched bearings (RANSAC, then Kabsch on the inliers), the gyroscope's
-relative rotations between consecutive keyframes as priors weighted by the device's noise figures, and
-one robust least-squares over all keyframe orientations (SciPy's `least_squares`, soft-L1 then Cauchy
-loss: a false loop closure costs little). The first keyframe holds the gauge (the IMU's orientation there, as the
-online pass starts from).
+relative rotations between consecutive keyframes as a chain weighted by the device's noise figures, with
+the gyroscope's calibration estimated, and one least-squares over all keyframe orientations (SciPy's
+`least_squares`; the pairs reweighted soft-L1 then Cauchy: a false loop closure costs little). The first
+keyframe holds the gauge (the IMU's orientation there, as the online pass starts from).
 
 Between keyframes, the correction (refined times the IMU's inverse, a world-frame rotation that the
 gyroscope's drift changes slowly) is interpolated in time; each frame's refined orientation is that
@@ -82,6 +82,11 @@ def _prefix_products(steps: Rotation) -> Rotation:
         q = Rotation.concatenate([q[:shift], q[:-shift] * q[shift:]])
         shift *= 2
     return q
+
+
+def chain_turns(steps: Rotation) -> Rotation:
+    """Each keyframe's rotation from the first (M,), from the relative rotations between consecutive ones (M-1,)."""
+    return Rotation.concatenate([Rotation.identity(1), _prefix_products(steps)])
 
 
 def integrated_gyroscope(t_ns: np.ndarray, omega: np.ndarray, times_s: np.ndarray) -> Rotation:
@@ -356,7 +361,7 @@ def calibrate_gyroscope(intervals: GyroIntervals, constraints: list[tuple[int, i
     sigma = np.array([np.hypot(c[3], gyro.sigma(key_t[c[1]] - key_t[c[0]], 0.0, calibrated=True)) for c in constraints])
 
     def residuals(theta):
-        turns = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.at(theta))])
+        turns = chain_turns(intervals.at(theta))
         r = (q_inv * turns[ii].inv() * turns[jj]).as_rotvec() / sigma[:, None]
         return np.concatenate([r.ravel(), theta / theta_sigma])
 
@@ -406,13 +411,13 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         intervals = GyroIntervals.of(gyro_stream[0], gyro_stream[1], key_t, gyro_stream[2])
         chain_sigma = np.array([gyro.sigma(dt, 0.0, calibrated=True) for dt in dts])
         theta_sigma = gyro.calibration_sigma()
-        raw = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.rotations)])
+        raw = chain_turns(intervals.rotations)
         near = [p for p in candidate_pairs(key_t, raw, hfov_deg) if key_t[p[1]] - key_t[p[0]] <= LOOP_S]
         # a pair further from the raw gyroscope than it can be off over the time between is a false match
         found = pairs_within(near, raw, lambda dt, angle: np.radians(PAIR_GATE_DEG) + 3 * gyro.sigma(dt, angle))
         if found:  # (without any, the fused orientation stays the start: its gravity corrections hold the tilt)
             theta = calibrate_gyroscope(intervals, found, key_t, gyro, theta_sigma)
-            start = Rotation.concatenate([Rotation.identity(1), _prefix_products(intervals.at(theta))])
+            start = chain_turns(intervals.at(theta))
     else:
         for i in range(len(keys) - 1):
             q = start[i].inv() * start[i + 1]

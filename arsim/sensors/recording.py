@@ -76,8 +76,9 @@ def _write_png(path: Path, frame: np.ndarray) -> None:
 
 
 BURST_METERING_FRAMES = 8  # unrecorded frames the burst's auto-exposure takes to settle on its view
-# The codes the response's scale is fitted on (capture/response.py: SCALE_FIT_CODES): a burst none of whose
-# frames has this fraction of its pixels there cannot calibrate, and the app looks for a better view.
+# The upper codes a burst must reach for the capture's response calibration to set its scale there (it
+# fits codes near 255 and refuses a burst without them): a burst none of whose brightest frames has this
+# fraction of its pixels in this range makes the app look for a better view.
 BURST_UPPER_CODES, BURST_MIN_UPPER = (200, 250), 0.001
 BURST_CANDIDATES = 24  # views along the sweep the app tries when the first burst view is too dark
 
@@ -114,10 +115,8 @@ def _write_burst(out_dir: Path, camera: CameraRenderer, views: Rotation, scenari
 
     view, settings = views[0], _burst_settings(camera, views[0], scenario, response)
     if len(views) > 1 and upper(view, settings) < BURST_MIN_UPPER:
-        tried = [(upper(v, s), k) for k, (v, s) in enumerate((v, _burst_settings(camera, v, scenario, response))
-                                                             for v in views[1:])]
-        best = max(tried)[1] + 1
-        view, settings = views[best], _burst_settings(camera, views[best], scenario, response)
+        tried = [(v, _burst_settings(camera, v, scenario, response)) for v in views[1:]]
+        view, settings = max(reversed(tried), key=lambda t: upper(*t))  # (the last of equals)
     (out_dir / "burst").mkdir(exist_ok=True)
     rows = []
     for k, (exposure, iso) in enumerate(settings):
