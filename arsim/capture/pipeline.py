@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from arsim.capture.accumulate import ProbeAccumulator
 from arsim.capture.align import Aligner
+from arsim.capture.drift import DriftFilter
 from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
 from arsim.capture.response import RecoveredResponse, calibrate_response
 from arsim.core.errors import ArsimError
@@ -22,20 +23,14 @@ from arsim.evaluate.recording_plots import frame_camera_orientations, recording_
 from arsim.scenario import Scenario
 from arsim.scenario.loader import parse_scenario
 from arsim.sensors.camera import SensorSettings, vignette
+from arsim.sensors.fusion import KP
 from arsim.sensors.recording import Recording
-
-
-# The largest plausible correction: this much, plus per second unaligned the larger of this rate (a tighter
-# one dropped true corrections on the interior's ceiling) and three times the device's own bias figures (a
-# gyroscope with a 1 degree/s turn-on bias drifts that fast: a fixed 1 degree/s rejected its corrections).
-GATE_DEG, GATE_DEG_PER_S = 0.5, 1.0
 
 
 @dataclass(frozen=True)
 class CaptureSettings:
     size: int = 512  # N of the captured N x N angle map
     align_every: int = 1  # metered frames between alignments (0: never align)
-    correction_gain: float = 0.5  # fraction of a measured correction applied at once (smooth; 1 = all)
     refine: bool = True  # the global rotation refinement after the online pass (README: HDR capture)
 
     @classmethod
@@ -43,22 +38,7 @@ class CaptureSettings:
         """The scenario's [capture] settings, with the command line's overrides where given."""
         c = scenario.capture
         return cls(c.capture_size if size is None else size, c.align_every if align_every is None else align_every,
-                   c.correction_gain, c.refine)
-
-
-class DriftCorrection:
-    """The world-frame rotation taking the IMU's orientation to the corrected one. Each successful
-    alignment moves it part of the way (gain) to what the alignment measured, so that single matches
-    do not jolt the orientation; a failed match changes nothing. (Extrapolating it at a fitted drift
-    rate was tried: the rate of a device-frame gyroscope bias, seen in the world frame, turns with the
-    sweep, and extrapolation over the featureless end of the sweep made the error worse.)"""
-
-    def __init__(self, gain: float):
-        self.gain = gain
-        self.rotation = Rotation.identity()
-
-    def update(self, measured: Rotation) -> None:
-        self.rotation = Slerp([0.0, 1.0], Rotation.concatenate([self.rotation, measured]))(self.gain)
+                   c.refine)
 
 
 @dataclass
@@ -73,6 +53,8 @@ class CaptureResult:
     aligned: np.ndarray  # (K,) bool: an online alignment succeeded at this frame
     seconds: float  # processing time (reading frames included)
     seconds_online: float  # of which the online pass
+    gyro_bias: tuple[np.ndarray, np.ndarray]  # the online pass's estimate of the gyroscope's residual bias
+    # (device axes, rad/s) and its standard deviations
     refinement: Refinement | None = None
 
     @property
@@ -168,11 +150,12 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     aligner = Aligner(camera, falloff, response, scenario.run.seed)
     uncorrected, truth = fused_camera_orientations(rec), frame_camera_orientations(rec)
     _check_overlap(rec, uncorrected, camera)
-    correction = DriftCorrection(settings.correction_gain)  # corrected = correction * uncorrected
     gyro_noise = GyroNoise.of(scenario.device.gyroscope)
-    gate_rate = max(np.radians(GATE_DEG_PER_S), 3 * gyro_noise.bias)  # rad/s
     corrected, aligned = [], np.zeros(len(rec.frames), dtype=bool)
-    times, last_aligned_t = np.array([f["t_ns"] for f in rec.frames]) / 1e9, 0.0
+    times = np.array([f["t_ns"] for f in rec.frames]) / 1e9
+    accelerometer = scenario.device.accelerometer
+    drift = DriftFilter(uncorrected, times, gyro_noise, accelerometer.turn_on_bias + accelerometer.bias_instability, KP,
+                        scenario.capture.fusion == "rotation-vector", settings.size)
     start = time.perf_counter()
     any_unclipped = False
     features = KeyframeFeatures(camera)
@@ -183,21 +166,19 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
         for k, (info, codes) in enumerate(zip(rec.frames, readers.map(read_frame, files))):
             any_unclipped |= bool(np.any(codes < 255))
             exposure_scale = scales[k]
-            predicted = correction.rotation * uncorrected[k]
+            drift.predict(k)
+            predicted = drift.correction() * uncorrected[k]
             metered, index = divmod(k, len(bracket))
             if index == 0 and settings.refine:
                 metered_small[k] = features.small(codes)
             # Only metered frames are aligned: the bracketed ones are dark but for the highlights.
             if settings.align_every and index == 0 and metered % settings.align_every == 0 and k > 0:
                 found = aligner.align(codes, accumulator, predicted.as_matrix(), exposure_scale)
-                # A match that would turn the view by more than the IMU can have drifted since the last
-                # one is a false match (few features, repeated patterns): it is dropped like a failed one.
-                plausible = np.radians(GATE_DEG) + gate_rate * (times[k] - last_aligned_t)
-                if found.rotation is not None and found.rotation.magnitude() <= plausible:
-                    last_aligned_t = times[k]
-                    correction.update(predicted * found.rotation * uncorrected[k].inv())
+                # A match further from the prediction than the filter's uncertainty allows is a false match
+                # (few features, repeated patterns): it is dropped like a failed one.
+                if found.rotation is not None and drift.update(predicted * found.rotation):
                     aligned[k] = True
-                    predicted = correction.rotation * uncorrected[k]
+                    predicted = drift.correction() * uncorrected[k]
             corrected.append(predicted)
             accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale**2,
                             exposure_levels.index(bracket[index]))
@@ -207,15 +188,21 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
         raise ArsimError(f"{rec.folder}: every frame is saturated (all codes 255); nothing can be captured from it")
     online = Rotation.concatenate(corrected)
     seconds_online = time.perf_counter() - start
+    mount = np.array(rec.meta["camera_to_device"])
+    bias, bias_sigma = drift.bias  # camera axes: the gyroscope's are the device's
+    gyro_bias = (mount @ bias, np.sqrt(mount**2 @ bias_sigma**2))
     if not settings.refine or not settings.align_every:
         return CaptureResult(accumulator, response, times, truth, uncorrected, online, online, aligned,
-                             seconds_online, seconds_online)
+                             seconds_online, seconds_online, gyro_bias)
     # The refined pass: every keyframe orientation at once, then the frames accumulated again with them.
     gyro = rec.imu["gyroscope"]
     refinement = refine(times, np.array(sorted(metered_small)), uncorrected, metered_small.__getitem__,
                         scenario.device.camera.hfov_deg, camera, gyro_noise,
-                        scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))))
-    accumulator = accumulate_frames(rec, refinement.orientations, response, settings.size,
+                        scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(mount)))
+    # with no keyframe pair the refinement has only the IMU's orientations: the online pass's, with the bias its
+    # filter learnt from whatever it aligned, are no worse
+    final = refinement.orientations if refinement.loop_closures else online
+    accumulator = accumulate_frames(rec, final, response, settings.size,
                                     lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage))
-    return CaptureResult(accumulator, response, times, truth, uncorrected, refinement.orientations, online, aligned,
-                         time.perf_counter() - start, seconds_online, refinement)
+    return CaptureResult(accumulator, response, times, truth, uncorrected, final, online, aligned,
+                         time.perf_counter() - start, seconds_online, gyro_bias, refinement)

@@ -51,12 +51,14 @@ class GyroNoise:
     bias: float  # rad/s: the turn-on bias and the bias instability together
     scale_factor: float  # relative
     misalignment: float = 0.0  # rad: each cross-axis term
+    random_walk: float = 0.0  # rad/s/sqrt(s): how fast the bias wanders (its random walk and instability together)
 
     @classmethod
     def of(cls, gyroscope) -> GyroNoise:
         """From a scenario's [device.gyroscope] section."""
+        wander = np.sqrt(gyroscope.bias_random_walk**2 + 2 * gyroscope.bias_instability**2 / gyroscope.bias_correlation_s)
         return cls(gyroscope.noise_density, gyroscope.turn_on_bias + gyroscope.bias_instability, gyroscope.scale_factor,
-                   gyroscope.misalignment_rad)
+                   gyroscope.misalignment_rad, float(wander))
 
     def calibration_sigma(self) -> np.ndarray:
         """The calibration's prior standard deviations (CALIBRATION,): D's diagonal the scale factors, its

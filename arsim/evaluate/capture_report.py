@@ -85,6 +85,8 @@ def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_erro
         "refined": result.refinement is not None,
         "keyframes": 0 if result.refinement is None else len(result.refinement.keyframes),
         "loop_closures": 0 if result.refinement is None else result.refinement.loop_closures,
+        "gyro_bias_dps_online": np.degrees(result.gyro_bias[0]).tolist(),
+        "gyro_bias_sigma_dps_online": np.degrees(result.gyro_bias[1]).tolist(),
         "seconds_online": result.seconds_online,
         "seconds_refinement": result.seconds - result.seconds_online,
         "radiance_median_abs_rel_err_pct": float(100 * np.median(rel)),
@@ -103,8 +105,11 @@ def unmatched_warning(metrics: dict) -> str | None:
     """Where nothing could be matched (no texture anywhere), the orientations are the gyroscope's alone."""
     if metrics["alignments_succeeded"] or metrics["loop_closures"]:
         return None
+    sigma = max(metrics["gyro_bias_sigma_dps_online"])
     return ("no frame could be aligned and no keyframes matched (a scene without features): the orientations are "
-            "the IMU's alone, the gyroscope integrated with its bias uncorrected; drift.png shows how far that is off")
+            "the IMU's alone, with the fusion's bias estimate (nothing measured it: its prior, 0 ± "
+            f"{sigma:.2g} degrees/s per axis from the device's figures, gyro_bias_dps_online); drift.png shows how far "
+            "that is off")
 
 
 def brightest_warning(metrics: dict) -> str | None:

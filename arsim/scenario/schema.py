@@ -164,6 +164,12 @@ def _unknown_key(key: str, known: list[str], where: str, top_level: bool) -> Sce
     return ScenarioError(f"{where} unknown key '{key}': {mean}(known keys: {', '.join(known)})")
 
 
+# Keys older versions wrote (a recording's meta.json keeps its scenario) that no longer mean anything: skipped on
+# load so that those recordings still read. capture.correction_gain: the online drift correction's gain is now
+# the Kalman filter's, from the device's noise figures (arsim/capture/drift.py).
+RETIRED_KEYS = {"capture": ("correction_gain",)}
+
+
 def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, path: str = "",
                   defaults: Any = None) -> Any:
     """An instance of the section dataclass cls from a TOML table, every key checked.
@@ -175,6 +181,7 @@ def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, pa
         raise ScenarioError(f"{source}: '{path}' must be a table ([{path}]), got {_describe(table)}")
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    table = {k: v for k, v in table.items() if k not in RETIRED_KEYS.get(path, ())}
     for key in table:
         if key not in fields:
             raise _unknown_key(key, list(fields), where, top_level=not path)

@@ -134,7 +134,6 @@ class CaptureSection:
                                                  "(metered; the others capture highlights)")
     align_every: int = setting(1, min=0, max=1000, unit="frames",
                                help="capture: align every K-th metered frame against the probe (0: never)")
-    correction_gain: float = setting(0.5, min=0.01, max=1.0, help="capture: share of a measured drift correction applied at once")
     refine: bool = setting(True, help="capture: refine every keyframe's orientation at once after the online pass "
                                       "(loop closures and gyroscope priors) and accumulate the probe again with them")
     capture_size: int = setting(512, min=16, max=4096, unit="texels", help="capture: N of the captured N x N angle map")

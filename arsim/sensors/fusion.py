@@ -22,6 +22,7 @@ from arsim.sensors.imu import SensorStream
 
 MODES = ("game-rotation-vector", "rotation-vector")
 UP = np.array([0.0, 1.0, 0.0])
+KP = 1.0  # the accelerometer's (and magnetometer's) proportional feedback, 1/s: the tilt error decays as exp(-KP t)
 
 
 def _unit(v: np.ndarray) -> np.ndarray | None:
@@ -40,7 +41,7 @@ def _sample_indices(streams: dict[str, SensorStream], mode: str):
 
 
 def mahony(streams: dict[str, SensorStream], start: Rotation, mode: str = "game-rotation-vector",
-           kp: float = 1.0, ki: float = 0.0) -> tuple[np.ndarray, Rotation]:
+           kp: float = KP, ki: float = 0.0) -> tuple[np.ndarray, Rotation]:
     """Fused device-to-world orientation at every gyroscope sample: (t_ns, rotations).
 
     The accelerometer is read at the sample nearest in time (it runs at the gyroscope's rate by
@@ -105,7 +106,7 @@ def _mahony_steps(t, gyro, accel, accel_at, mag, mag_at, use_mag, q0, kp, ki):  
 
 
 def mahony_reference(streams: dict[str, SensorStream], start: Rotation, mode: str = "game-rotation-vector",
-                     kp: float = 1.0, ki: float = 0.0) -> tuple[np.ndarray, Rotation]:
+                     kp: float = KP, ki: float = 0.0) -> tuple[np.ndarray, Rotation]:
     """mahony step by step with scipy rotations: the reference the compiled filter is tested against."""
     t, accel_at, mag_at = _sample_indices(streams, mode)
     gyro, accel, mag = streams["gyroscope"], streams["accelerometer"], streams["magnetometer"]
