@@ -13,7 +13,10 @@ from arsim.core.errors import ArsimError
 # Codes whose recovered value sets the scale: near the top where the curve is known to end (code 255 is
 # full scale for every 8-bit display-referred response), as close to it as the medians reach (200-250 left
 # every probe of the matrix's normal cases about 1 % too bright: a longer extrapolation over the shoulder).
+# Where the burst never reaches them (a dim night at the camera's longest exposure and highest ISO), the
+# highest SCALE_FIT_SPAN codes it does reach.
 SCALE_FIT_CODES = np.arange(225, 255)
+SCALE_FIT_SPAN = len(SCALE_FIT_CODES)
 ERROR_CODES = np.arange(5, 251)  # where the error is reported: codes 0-4 are noise, 251-255 clip
 
 
@@ -30,12 +33,15 @@ def _fill_and_scale(curve: np.ndarray) -> np.ndarray:
     fitted to the log over SCALE_FIT_CODES: Robertson's own value at 255 mixes every clipped level)."""
     codes = np.arange(256)
     good = np.isfinite(curve) & (curve > 0)
-    if good.sum() < len(SCALE_FIT_CODES) // 2 or not good[SCALE_FIT_CODES].any():
+    good[255] = False  # Robertson's value at 255 mixes every clipped level
+    top = codes[good][-1] if good.any() else 0
+    if good.sum() < SCALE_FIT_SPAN or top < SHAPE_CODES[1]:
         raise ArsimError("the response burst does not reach the upper codes: the burst frames are too dark to "
                          "calibrate the response; record again with more burst frames or a larger burst_step")
     log = np.interp(codes, codes[good], np.log(curve[good]))
-    fit = good[SCALE_FIT_CODES]
-    coefficients = np.polyfit(SCALE_FIT_CODES[fit], log[SCALE_FIT_CODES][fit], 2)
+    fit_codes = SCALE_FIT_CODES if good[SCALE_FIT_CODES].sum() >= SCALE_FIT_SPAN // 2 else np.arange(top - SCALE_FIT_SPAN + 1, top + 1)
+    fit = good[fit_codes]
+    coefficients = np.polyfit(fit_codes[fit], log[fit_codes][fit], 2)
     linear = np.exp(log - np.polyval(coefficients, 255.0))
     linear[0] = 0.0  # code 0 holds everything below the first step
     linear[255] = max(1.0, linear[254])  # full scale (Robertson's value mixes every clipped level)
@@ -110,7 +116,10 @@ def _by_median_codes(frames: list[np.ndarray], products: np.ndarray, linear: np.
     target = np.arange(1, 255)
     inside = (target > zb[0]) & (target < zb[-1])
     out[target[inside]] = np.exp(np.interp(target[inside], zb, np.log(xb)))
-    return np.maximum.accumulate(out)
+    # above the highest median reached Robertson's values are those the noise pulls down: unknown, so that the
+    # scale is fitted where the medians hold
+    out[target[target >= zb[-1]]] = np.nan
+    return out
 
 
 def response_error(recovered: RecoveredResponse, true_linear: np.ndarray) -> dict:
