@@ -81,8 +81,8 @@ LOOP_PAIRS = [(("yx", [40, -10]), ("yxz", [62, -25, 3])), (("yx", [130, 5]), ("y
 @pytest.mark.parametrize("env", ["city", "courtyard", "forest"])
 def test_loop_closure_pairs_are_found_to_their_known_rotation(env):
     """Noise-free views of a textured environment at known orientations: each pair's relative rotation as
-    the keyframes' features find it. Measured at the keyframes' quarter scale: 0.005-0.08 degrees, median
-    0.02 (at half scale every one within 0.05)."""
+    the keyframes' features find it. Measured at the keyframes' half scale: 0.010-0.042 degrees, median 0.020
+    (at a quarter scale, 0.005-0.08)."""
     probe = to_layout(read_hdr(assets_dir() / "envmaps" / f"{env}.exr"), "anglemap", 512)
     camera = CameraIntrinsics.from_fov(640, 480, 60.0)
     features = KeyframeFeatures(camera)
@@ -97,4 +97,4 @@ def test_loop_closure_pairs_are_found_to_their_known_rotation(env):
         found = match_pair(features(0, frames[0]), features(1, frames[1]), np.random.default_rng(0))
         assert found is not None and found[2] >= 12
         errors.append(np.degrees((found[0].inv() * (ra.inv() * rb)).magnitude()))
-    assert np.median(errors) < 0.05 and max(errors) < 0.1, errors
+    assert max(errors) < 0.05, errors
