@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from arsim.capture.accumulate import ProbeAccumulator, accumulate_reference
+from arsim.capture.accumulate import NoiseWeights, ProbeAccumulator, SensorNoise, accumulate_reference
 from arsim.capture.align import Aligner
 from arsim.capture.response import RecoveredResponse, calibrate_response, response_error
 from arsim.core.conventions import CameraIntrinsics, anglemap_directions, anglemap_disk_mask
@@ -43,16 +43,22 @@ def ideal_response():
 
 
 @pytest.mark.parametrize("level", [0, 1])
-def test_compiled_accumulation_equals_the_numpy_oracle(level):
+@pytest.mark.parametrize("noisy", [False, True])
+def test_compiled_accumulation_equals_the_numpy_oracle(level, noisy):
     camera = CameraIntrinsics.from_fov(120, 90, 70.0, k1=-0.05, k2=0.01)
     falloff = np.linspace(0.7, 1.0, 120 * 90).reshape(90, 120)
     codes = np.random.default_rng(1).integers(0, 256, (90, 120, 3), dtype=np.uint8)
     codes[:20] = 255  # clipped rows
     radiance_of_code = np.random.default_rng(2).random((256, 3)) + 0.1
     rotation = Rotation.from_euler("xyz", [20, -130, 5], degrees=True).as_matrix()
-    acc = ProbeAccumulator(64, camera, falloff, levels=2)
-    acc.add(codes, radiance_of_code, rotation, 0.37, level)
-    reference = accumulate_reference(64, camera, falloff, codes, radiance_of_code, rotation, 0.37, level)
+    noise, sensor = None, SensorNoise(6000.0, 3.0)
+    if noisy:  # expected radiances from 0 (weightless: clipped noise) to past full scale, some unknown
+        expected = np.random.default_rng(3).random((64, 64, 3)) * 3.0 - 0.2
+        noise = NoiseWeights(TRUE_CURVE.decode(np.arange(256)), expected)
+    acc = ProbeAccumulator(64, camera, falloff, levels=2, sensor=sensor, noise=noise)
+    acc.add(codes, radiance_of_code, rotation, 0.6, level, gain=4.0)
+    reference = accumulate_reference(64, camera, falloff, codes, radiance_of_code, rotation, 0.6, level, 4.0, sensor,
+                                     noise)
     for compiled, oracle in zip(acc.levels, reference):
         assert (oracle > 0).sum() > 100 and not compiled[1 - level].any()
         np.testing.assert_allclose(compiled[level], oracle, rtol=1e-4, atol=1e-12)
@@ -111,7 +117,7 @@ def swept_lamp(levels: int, bracket_ev: tuple[float, ...] = (0.0, -14.0), error_
         index = k % len(bracket_ev)
         scale = 0.18 / 0.5 * 2.0 ** bracket_ev[index]
         frame = TRUE_CURVE.encode(environment_view_reference(probe, camera, truth) * scale)
-        acc.add(frame, ideal_response().linear / scale, taken.as_matrix(), scale**2, min(index, levels - 1))
+        acc.add(frame, ideal_response().linear / scale, taken.as_matrix(), scale, min(index, levels - 1))
     return acc
 
 
