@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from arsim.capture.pipeline import CaptureSettings, accumulate_frames, capture, expected_radiance, recording_scenario
+from arsim.capture.pipeline import CaptureSettings, accumulate_frames, capture, recording_scenario
 from arsim.capture.response import RecoveredResponse, response_error
 from arsim.core.assets import assets_dir, scenarios_dir
 from arsim.core.errors import ArsimError
@@ -94,15 +94,11 @@ def run_case(text: str, work: Path) -> dict:
     truth = load_environment(dataclasses.replace(sc.environment, probe_size=settings.size))
     metrics, _ = capture_metrics(result, truth, response_error(result.response, true_response))
     # The causes: the same frames merged at the capture's orientations with the true response, and the
-    # floor: at the true orientations with the true response (the ideal merge). Both with the noise weights,
-    # as the capture: the expected radiance from the capture's probe, and for the ideal merge from a first
-    # pass of its own
+    # floor: at the true orientations with the true response (the ideal merge)
     exact = RecoveredResponse(np.repeat(true_response[:, None], 3, axis=1))
-    responded, _ = probe_map_errors(accumulate_frames(rec, result.corrected, exact, settings.size,
-                                                      expected=expected_radiance(result.accumulator.radiance)), truth)
+    responded, _ = probe_map_errors(accumulate_frames(rec, result.corrected, exact, settings.size), truth)
     metrics["true_response_irradiance_err_pct"] = responded[0].mean_percent
-    first = accumulate_frames(rec, result.truth, exact, settings.size)
-    floor, _ = probe_map_errors(accumulate_frames(rec, result.truth, exact, settings.size, expected=expected_radiance(first.radiance)), truth)
+    floor, _ = probe_map_errors(accumulate_frames(rec, result.truth, exact, settings.size), truth)
     metrics["ideal_irradiance_err_pct"], metrics["ideal_s80_err_pct"] = floor[0].mean_percent, floor[1].mean_percent
     return {"status": "ok", "seconds": time.perf_counter() - start, **{k: metrics[k] for _, k, _ in COLUMNS}}
 

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from arsim.capture.accumulate import NoiseWeights, ProbeAccumulator, SensorNoise
+from arsim.capture.accumulate import ProbeAccumulator, SensorNoise
 from arsim.capture.align import Aligner
 from arsim.capture.drift import DriftFilter
 from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
@@ -111,28 +111,18 @@ def exposure_scales(rec: Recording, sensor: SensorSettings) -> list[float]:
     return [f["exposure_ns"] / 1e9 * f["iso"] / sensor.base_iso * sensor.sensitivity for f in rec.frames]
 
 
-def expected_radiance(radiance: np.ndarray) -> np.ndarray:
-    """The radiance a first pass found (N, N, 3; -1 unseen), as the noise weights expect it: the least of each
-    texel's 3 x 3 neighbourhood, so that a first pass's misregistered lamp does not spill into the walls beside
-    it (there the weights would take the wall's samples for a lamp's)."""
-    return cv2.erode(np.ascontiguousarray(radiance, dtype=np.float32), np.ones((3, 3), np.uint8)).astype(np.float64)
-
-
 def accumulate_frames(rec: Recording, orientations: Rotation, response: RecoveredResponse, size: int,
-                      progress: Callable[[float, float], None] = lambda fraction, coverage: None,
-                      expected: np.ndarray | None = None) -> ProbeAccumulator:
+                      progress: Callable[[float, float], None] = lambda fraction, coverage: None) -> ProbeAccumulator:
     """Every frame of the recording accumulated into a size x size angle map at the given camera-to-world
     orientations (K,), linearised with the response: the refined pass, or (true orientations, true
-    response) the ideal merge that bounds what any capture of the same frames can do. expected: the radiance
-    a first pass over the frames found (N, N, 3; -1 unseen), for the noise-optimal weights (README: HDR capture)."""
+    response) the ideal merge that bounds what any capture of the same frames can do."""
     scenario = recording_scenario(rec)
     bracket = scenario.capture.bracket_ev
     sensor = SensorSettings.of(scenario.device.camera)
     camera = recording_camera(rec)
     levels = sorted(set(bracket), reverse=True)
-    noise = None if expected is None else NoiseWeights(response.linear[:, 1], expected)
     accumulator = ProbeAccumulator(size, camera, vignette(camera.height, camera.width, sensor.vignetting), levels=len(levels),
-                                   sensor=SensorNoise(sensor.full_well_e, sensor.read_noise_e), noise=noise)
+                                   sensor=SensorNoise(sensor.full_well_e, sensor.read_noise_e))
     files, scales = [rec.folder / f["file"] for f in rec.frames], exposure_scales(rec, sensor)
     with ThreadPoolExecutor(2) as readers:
         for k, codes in enumerate(readers.map(read_frame, files)):
@@ -214,9 +204,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     # with no keyframe pair the refinement has only the IMU's orientations: the online pass's, with the bias its
     # filter learnt from whatever it aligned, are no worse
     final = refinement.orientations if refinement.loop_closures else online
-    # the online pass's probe is the expected radiance of the noise weights
     accumulator = accumulate_frames(rec, final, response, settings.size,
-                                    lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage),
-                                    expected=expected_radiance(accumulator.radiance))
+                                    lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage))
     return CaptureResult(accumulator, response, times, truth, uncorrected, final, online, aligned,
                          time.perf_counter() - start, seconds_online, gyro_bias, refinement)
