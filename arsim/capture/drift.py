@@ -42,7 +42,7 @@ STANDARD_GRAVITY = 9.80665
 
 class DriftFilter:
     """The correction (exp(-theta)) to apply to the fused camera-to-world orientations (K,) at times (K,) s,
-    frame by frame: predict(k), then update(k, measured) where an alignment measured the frame's orientation."""
+    frame by frame: predict(k), then update(measured) where an alignment measured frame k's orientation."""
 
     def __init__(self, fused: Rotation, times: np.ndarray, gyro: GyroNoise, accel_bias: float, kp: float,
                  corrects_heading: bool, probe_size: int):

@@ -105,6 +105,17 @@ def _check_overlap(rec: Recording, orientations: Rotation, camera) -> None:
                          "frames per second or a slower sweep")
 
 
+def new_accumulator(size: int, camera, falloff: np.ndarray, sensor: SensorSettings, levels: int) -> ProbeAccumulator:
+    """An empty size x size angle map for the recording's frames, with the sensor's noise figures (for the
+    correction of the noise clipped at code 0)."""
+    return ProbeAccumulator(size, camera, falloff, levels=levels, sensor=SensorNoise(sensor.full_well_e, sensor.read_noise_e))
+
+
+def gains(rec: Recording, sensor: SensorSettings) -> list[float]:
+    """Each frame's analog gain: its ISO over the base ISO."""
+    return [f["iso"] / sensor.base_iso for f in rec.frames]
+
+
 def exposure_scales(rec: Recording, sensor: SensorSettings) -> list[float]:
     """Each frame's exposure (time x ISO / base ISO x the sensor's sensitivity): radiance x this is what its
     codes encode."""
@@ -121,13 +132,12 @@ def accumulate_frames(rec: Recording, orientations: Rotation, response: Recovere
     sensor = SensorSettings.of(scenario.device.camera)
     camera = recording_camera(rec)
     levels = sorted(set(bracket), reverse=True)
-    accumulator = ProbeAccumulator(size, camera, vignette(camera.height, camera.width, sensor.vignetting), levels=len(levels),
-                                   sensor=SensorNoise(sensor.full_well_e, sensor.read_noise_e))
-    files, scales = [rec.folder / f["file"] for f in rec.frames], exposure_scales(rec, sensor)
+    accumulator = new_accumulator(size, camera, vignette(camera.height, camera.width, sensor.vignetting), sensor, len(levels))
+    files, scales, gain = [rec.folder / f["file"] for f in rec.frames], exposure_scales(rec, sensor), gains(rec, sensor)
     with ThreadPoolExecutor(2) as readers:
         for k, codes in enumerate(readers.map(read_frame, files)):
             accumulator.add(codes, response.linear / scales[k], orientations[k].as_matrix(), scales[k],
-                            levels.index(bracket[k % len(bracket)]), rec.frames[k]["iso"] / sensor.base_iso)
+                            levels.index(bracket[k % len(bracket)]), gain[k])
             if k % 30 == 0 or k == len(rec.frames) - 1:
                 progress((k + 1) / len(rec.frames), accumulator.coverage())
     return accumulator
@@ -147,8 +157,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     falloff = vignette(camera.height, camera.width, sensor.vignetting)
     response = burst_response(rec, sensor)
     exposure_levels = sorted(set(bracket), reverse=True)  # the accumulator's levels, longest exposure first
-    accumulator = ProbeAccumulator(settings.size, camera, falloff, levels=len(exposure_levels),
-                                   sensor=SensorNoise(sensor.full_well_e, sensor.read_noise_e))
+    accumulator = new_accumulator(settings.size, camera, falloff, sensor, len(exposure_levels))
     aligner = Aligner(camera, falloff, response, scenario.run.seed)
     uncorrected, truth = fused_camera_orientations(rec), frame_camera_orientations(rec)
     _check_overlap(rec, uncorrected, camera)
@@ -163,9 +172,9 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     features = KeyframeFeatures(camera)
     metered_small: dict[int, np.ndarray] = {}  # what the refinement's keyframes are taken from
     files = [rec.folder / f["file"] for f in rec.frames]
-    scales = exposure_scales(rec, sensor)
+    scales, gain = exposure_scales(rec, sensor), gains(rec, sensor)
     with ThreadPoolExecutor(2) as readers:  # PNG decoding releases the GIL: read ahead
-        for k, (info, codes) in enumerate(zip(rec.frames, readers.map(read_frame, files))):
+        for k, codes in enumerate(readers.map(read_frame, files)):
             any_unclipped |= bool(np.any(codes < 255))
             exposure_scale = scales[k]
             drift.predict(k)
@@ -183,7 +192,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
                     predicted = drift.correction() * uncorrected[k]
             corrected.append(predicted)
             accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale,
-                            exposure_levels.index(bracket[index]), info["iso"] / sensor.base_iso)
+                            exposure_levels.index(bracket[index]), gain[k])
             if k % 30 == 0 or k == len(rec.frames) - 1:
                 progress((k + 1) / len(rec.frames) * (0.6 if settings.refine else 1.0), accumulator.coverage())
     if not any_unclipped:
