@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from arsim.capture.refine import CHAIN_FLOOR_DEG, GyroNoise, KeyframeFeatures, interpolate, match_pair, solve
+from arsim.capture.refine import CHAIN_FLOOR_DEG, GyroNoise, KeyframeFeatures, interpolate, isotropic, match_pair, solve
 from arsim.core.assets import assets_dir
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.hdr_io import read_hdr
@@ -22,8 +22,8 @@ def _spiral(m: int) -> Rotation:
 
 def _constraints(truth: Rotation, loop: int, sigma: float = np.radians(0.05)):
     m = len(truth)
-    chain = [(i, i + 1, truth[i].inv() * truth[i + 1], sigma) for i in range(m - 1)]
-    closures = [(i, i + loop, truth[i].inv() * truth[i + loop], sigma) for i in range(m - loop)]
+    chain = [(i, i + 1, truth[i].inv() * truth[i + 1], isotropic(sigma)) for i in range(m - 1)]
+    closures = [(i, i + loop, truth[i].inv() * truth[i + loop], isotropic(sigma)) for i in range(m - loop)]
     return chain + closures
 
 
@@ -52,7 +52,7 @@ def test_priors_hold_keyframes_without_constraints():
     truth = _spiral(20)
     start = Rotation.from_rotvec(np.outer(np.linspace(0, 1, 20), np.radians([0, 1.0, 0]))) * truth
     # only a chain over the first half: the second half is held by its priors alone
-    constraints = [(i, i + 1, truth[i].inv() * truth[i + 1], np.radians(0.05)) for i in range(9)]
+    constraints = [(i, i + 1, truth[i].inv() * truth[i + 1], isotropic(np.radians(0.05))) for i in range(9)]
     refined, _, _, _ = solve(start, constraints, truth, np.full(20, np.radians(0.3)))
     assert np.degrees((refined.inv() * truth).magnitude()).max() < 1e-4
 
