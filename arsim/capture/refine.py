@@ -192,8 +192,8 @@ def match_pair(a: Keyframe, b: Keyframe, rng: np.random.Generator, expected: Rot
     matched only among a's within radius (rad) of where Q puts it, mutual nearest descriptors. In a dark or
     bare view most of the features are noise, and matched without the prior they pass RANSAC in small
     clusters that pin the rotation poorly (with the covariance below: the dim studio's refined orientation
-    1.31 -> 0.11 degrees RMS; Lowe's ratio test instead of the mutual
-    check lost the ceiling's few true matches: 20 s drifting sweep 0.18 -> 0.26)."""
+    1.31 -> 0.11 degrees RMS; Lowe's ratio test instead of the mutual check lost the ceiling's few true
+    matches: 20 s drifting sweep 0.18 -> 0.26)."""
     if a.descriptors is None or b.descriptors is None or len(a.bearings) < MIN_INLIERS or len(b.bearings) < MIN_INLIERS:
         return None
     if expected is None:
@@ -204,8 +204,9 @@ def match_pair(a: Keyframe, b: Keyframe, rng: np.random.Generator, expected: Rot
         d2 = np.sum(da**2, axis=1)[:, None] + np.sum(db**2, axis=1)[None, :] - 2 * da @ db.T
         d2[(a.bearings @ expected.apply(b.bearings).T) <= np.cos(radius)] = np.inf
         nearest_b, nearest_a = np.argmin(d2, axis=1), np.argmin(d2, axis=0)
-        ia = [k for k in range(len(da)) if np.isfinite(d2[k, nearest_b[k]]) and nearest_a[nearest_b[k]] == k]
-        ib = [int(nearest_b[k]) for k in ia]
+        k = np.arange(len(da))
+        ia = k[np.isfinite(d2[k, nearest_b]) & (nearest_a[nearest_b] == k)]
+        ib = nearest_b[ia]
     if len(ia) < MIN_PAIR_INLIERS:
         return None
     ba, bb = a.bearings[ia], b.bearings[ib]
@@ -394,7 +395,7 @@ def interpolate(times: np.ndarray, keys: np.ndarray, refined_keys: Rotation, imu
 def calibrate_gyroscope(intervals: GyroIntervals, constraints: list[Constraint],
                         key_t: np.ndarray, gyro: GyroNoise, theta_sigma: np.ndarray) -> np.ndarray:
     """The gyroscope's calibration (CALIBRATION,) that makes its chain between keyframes agree with the
-    feature pairs (i, j, Q, sigma) taken close in time (each pair against the chain's product from i to j,
+    feature pairs (i, j, Q, C) taken close in time (each pair against the chain's product from i to j,
     within the pair's and the calibrated chain's uncertainty); robust (soft-L1), the calibration's prior 0."""
     ii = np.array([c[0] for c in constraints], dtype=int)
     jj = np.array([c[1] for c in constraints], dtype=int)
