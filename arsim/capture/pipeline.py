@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from arsim.capture.accumulate import ProbeAccumulator, SensorNoise
 from arsim.capture.align import Aligner
+from arsim.capture.direct import DirectImages
 from arsim.capture.drift import DriftFilter
 from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
 from arsim.capture.response import RecoveredResponse, calibrate_response
@@ -209,7 +210,8 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     gyro = rec.imu["gyroscope"]
     refinement = refine(times, np.array(sorted(metered_small)), uncorrected, metered_small.__getitem__,
                         scenario.device.camera.hfov_deg, camera, gyro_noise,
-                        scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(mount)))
+                        scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(mount)),
+                        DirectImages(features.camera, camera, response.linear, falloff))
     # with no keyframe pair the refinement has only the IMU's orientations: the online pass's, with the bias its
     # filter learnt from whatever it aligned, are no worse
     final = refinement.orientations if refinement.loop_closures else online

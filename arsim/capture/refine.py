@@ -24,6 +24,7 @@ from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation, Slerp
 
 from arsim.capture.align import MIN_INLIERS, robust_rotation, scaled_camera, sift_detector
+from arsim.capture.direct import DirectImage, DirectImages, align_direct
 from arsim.core.conventions import CameraIntrinsics
 
 KEY_DEG = 5.0  # a metered frame becomes a keyframe once the view has turned this far from the last one
@@ -146,6 +147,7 @@ class Keyframe:
     frame: int  # index into the recording's frames
     bearings: np.ndarray  # (n, 3) unit vectors in camera axes of the features
     descriptors: np.ndarray | None  # (n, 128) float32 SIFT
+    image: DirectImage | None = None  # for direct alignment, where the features pin too little
 
 
 @dataclass
@@ -159,6 +161,7 @@ class Refinement:
     cost_before: float
     cost_after: float
     calibration: np.ndarray  # (CALIBRATION,) the gyroscope's estimated corrections (zeros without its stream)
+    direct_pairs: int = 0  # of the pairs used, those aligned directly (no feature pair reached their keyframes)
     seconds: float = 0.0  # features, matching and the solve (not the accumulation again)
 
 
@@ -170,6 +173,7 @@ class KeyframeFeatures:
         self.camera = scaled_camera(camera, KEY_SCALE)
         self.sift = sift_detector()
         self.clahe = cv2.createCLAHE(clipLimit=6.0, tileGridSize=(4, 4))
+        self.direct: DirectImages | None = None  # set (by the capture, which knows the response): images kept too
 
     def small(self, codes: np.ndarray) -> np.ndarray:
         """The frame at the size features are found at (what to keep of a frame that may become a keyframe)."""
@@ -181,7 +185,8 @@ class KeyframeFeatures:
         # (clipped and black regions have no texture of the scene: no mask needed, SIFT finds none there)
         keypoints, descriptors = self.sift.detectAndCompute(grey, None)
         points = np.array([k.pt for k in keypoints], dtype=np.float64).reshape(-1, 2)
-        return Keyframe(frame, self.camera.unproject(points), descriptors)
+        return Keyframe(frame, self.camera.unproject(points), descriptors,
+                        None if self.direct is None else self.direct(small))
 
 
 def match_pair(a: Keyframe, b: Keyframe, rng: np.random.Generator, expected: Rotation | None = None,
@@ -413,11 +418,13 @@ def calibrate_gyroscope(intervals: GyroIntervals, constraints: list[Constraint],
 
 
 def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_deg: float,
-           camera: CameraIntrinsics, gyro: GyroNoise, seed: int = 0, gyro_stream: tuple | None = None) -> Refinement:
+           camera: CameraIntrinsics, gyro: GyroNoise, seed: int = 0, gyro_stream: tuple | None = None,
+           direct: DirectImages | None = None) -> Refinement:
     """Refined orientations of every frame. times (K,): seconds; metered: indices of the frames taken at the
     metered exposure (the ones matched); imu: the IMU's camera-to-world orientations (K,); frames(k): frame
     k's 8-bit codes; gyro_stream: (t_ns, omega, camera-to-device mount) of the raw gyroscope, whose relative
-    rotations between keyframes are then the chain, calibrated (else the fused orientation's, uncalibrated).
+    rotations between keyframes are then the chain, calibrated (else the fused orientation's, uncalibrated);
+    direct: how keyframes are aligned directly where no feature pair reaches them (none: they are not).
 
     In three steps: the gyroscope calibrated against the pairs taken close in time (matched and gated
     against the raw gyroscope, which drifts little over a few seconds), so that its chain alone starts
@@ -427,21 +434,38 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
     keys = select_keyframes(metered, imu, times)
     key_t = times[keys]
     features = KeyframeFeatures(camera)  # (frames(k) may give the frame at features.small's size already)
+    features.direct = direct
     keyframes = [features(int(k), frames(int(k))) for k in keys]
     rng = np.random.default_rng(seed)
     matched: dict[tuple[int, int], tuple[Rotation, np.ndarray, int] | None] = {}
+    aligned: dict[tuple[int, int], tuple[Rotation, np.ndarray] | None] = {}
 
     def pairs_within(pairs, expected: Rotation, gate) -> list[Constraint]:
         """The pairs matched within gate(dt, angle) (rad) of the expected orientations' (per keyframe) relative
-        rotation, and agreeing with it within the same."""
-        out = []
+        rotation, and agreeing with it within the same; then, for the keyframes no feature pair reaches, their
+        pairs aligned directly (a bare ceiling: the 20 s drifting sweep's last 8 s)."""
+        out, radii = [], {}
         for i, j in sorted(pairs):
             q = expected[i].inv() * expected[j]
-            radius = gate(key_t[j] - key_t[i], q.magnitude())
+            radius = radii[(i, j)] = gate(key_t[j] - key_t[i], q.magnitude())
             if (i, j) not in matched:
                 matched[(i, j)] = match_pair(keyframes[i], keyframes[j], rng, q, radius)
             found = matched[(i, j)]
             if found is not None and (found[0].inv() * q).magnitude() < radius:
+                out.append((i, j, found[0], found[1]))
+        if direct is None:
+            return out
+        reached = {c[0] for c in out} | {c[1] for c in out}
+        for i, j in sorted(pairs):
+            if i in reached and j in reached:
+                continue
+            q = expected[i].inv() * expected[j]
+            if (i, j) not in aligned:
+                match = align_direct(keyframes[i].image, keyframes[j].image, direct, q)
+                aligned[(i, j)] = None if match is None else (
+                    match.rotation, match.covariance + isotropic(np.radians(PAIR_FLOOR_DEG)))
+            found = aligned[(i, j)]
+            if found is not None and (found[0].inv() * q).magnitude() < radii[(i, j)]:
                 out.append((i, j, found[0], found[1]))
         return out
 
@@ -479,5 +503,7 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
                                                     theta_sigma, near=k_round > 0, theta0=theta)
         before = before or cost_before
     used = len(constraints) - len(chain)  # (keyframe 0 was held: estimate[0] is the IMU's in every case)
+    direct_pairs = sum(1 for c in constraints[len(chain):] if (c[0], c[1]) in aligned
+                       and aligned[(c[0], c[1])] is not None and aligned[(c[0], c[1])][0] is c[2])
     return Refinement(interpolate(times, keys, estimate, imu), keys, used, len(pairs), before, after, theta,
-                      time.perf_counter() - began)
+                      direct_pairs, time.perf_counter() - began)
