@@ -200,7 +200,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"captured {metrics['frames']} frames at {metrics['frames_per_second']:.1f} frames/s into {out / 'env.exr'}: "
           f"{metrics['coverage_pct']:.2f} % covered; orientation error RMS {metrics['orientation_rms_deg_corrected']:.2f} degrees "
-          + (f"refined ({metrics['keyframes']} keyframes, {metrics['loop_closures']} matched pairs), "
+          + (f"refined ({metrics['keyframes']} keyframes, {metrics['loop_closures']} matched pairs, "
+             f"{metrics['direct_pairs']} of them aligned directly), "
              f"{metrics['orientation_rms_deg_online']:.2f} online, " if metrics["refined"] else "corrected, ")
           + f"{metrics['orientation_rms_deg_uncorrected']:.2f} uncorrected; irradiance map error "
           f"{metrics['irradiance_mean_err_pct']:.2f} %; metrics in {out / 'metrics.json'}")

@@ -85,6 +85,7 @@ def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_erro
         "refined": result.refinement is not None,
         "keyframes": 0 if result.refinement is None else len(result.refinement.keyframes),
         "loop_closures": 0 if result.refinement is None else result.refinement.loop_closures,
+        "direct_pairs": 0 if result.refinement is None else result.refinement.direct_pairs,
         "gyro_bias_dps_online": np.degrees(result.gyro_bias[0]).tolist(),
         "gyro_bias_sigma_dps_online": np.degrees(result.gyro_bias[1]).tolist(),
         "seconds_online": result.seconds_online,
