@@ -13,6 +13,7 @@ import numpy as np
 
 from arsim import __version__
 from arsim.core.assets import assets_dir, bundled_scenarios
+from arsim.core.conventions import is_map_size
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
 from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
@@ -23,7 +24,7 @@ from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_com
 from arsim.evaluate.diff import DEFAULT_MAX_FLIP
 from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
 from arsim.lighting.bake_output import write_bake
-from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method
+from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake, method
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 from arsim.sensors.recording import load_recording, record, recording_segments
 
@@ -216,7 +217,7 @@ def _session_inputs(scenario, out: Path, env: Path | None, map_size: int, captur
     (the --env file, else captured from the sweep; None when not wanted) as a map_size angle map, and the
     camera's response (from the capture, or from the sweep's burst)."""
     from arsim.capture.pipeline import CaptureSettings, burst_response, capture
-    from arsim.evaluate.capture_report import filled
+    from arsim.capture.accumulate import filled
     from arsim.sensors.camera import SensorSettings
 
     probe = _probe(env, map_size) if env is not None else None  # read early: a bad file fails first
@@ -234,6 +235,8 @@ def _session_inputs(scenario, out: Path, env: Path | None, map_size: int, captur
 def cmd_render(args: argparse.Namespace) -> int:
     import dataclasses
 
+    from arsim.evaluate.diff import masked_flip
+    from arsim.evaluate.session import session_metrics
     from arsim.lighting.bake_output import read_bake
     from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, check_maps, maps_needed, run_session, session_maps
@@ -245,8 +248,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     recording_segments(scenario)
     r = scenario.render
     method, map_size = args.method or r.method, args.map_size or r.map_size
-    if not _is_map_size(map_size):
-        raise ArsimError(f"[render] map_size {map_size} is not a power of two from 8 up: give 64, 128, 256, ...")
     if args.env is not None and args.maps:
         raise ArsimError("--env and --maps both give the light: pass one of them")
     objects = scene_objects(r)  # a mesh that cannot be read fails here, before any work
@@ -273,10 +274,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay,
                                flip_every=r.flip_every)
     with progress_bar(f"rendering the AR session ({', '.join(needed)} maps)", 1.0) as update:
-        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), settings,
-                              truth_objects=light_objects(objects, truth), progress=lambda f: update(completed=f))
+        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), masked_flip,
+                              settings, truth_objects=light_objects(objects, truth), progress=lambda f: update(completed=f))
     source = str(args.env) if args.env is not None else ", ".join(map(str, args.maps)) if args.maps else "captured"
-    metrics = session.metrics() | {"method": method, "methods": needed, "map_size": map_size, "log_average": log_average,
+    metrics = session_metrics(ar, session)[1] | {"method": method, "methods": needed, "map_size": map_size, "log_average": log_average,
                                    "probe": source}
     write_text_atomic(out / "metrics.json", json_text(metrics))
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: {_tracking_p95(metrics)}; "
@@ -299,7 +300,7 @@ def _tile_policy(text: str) -> int | None:
 
 def cmd_profile(args: argparse.Namespace) -> int:
 
-    from arsim.evaluate.profile import sweep_table, write_profile
+    from arsim.evaluate.profile import ProfileRun, sweep_table, write_profile
     from arsim.render.baking import BakeSettings
     from arsim.render.content import scene_objects
     from arsim.render.session import SessionSettings, run_profile
@@ -310,8 +311,6 @@ def cmd_profile(args: argparse.Namespace) -> int:
     recording_segments(scenario)
     r, pr = scenario.render, scenario.profile
     map_size = args.map_size or r.map_size
-    if not _is_map_size(map_size):
-        raise ArsimError(f"[render] map_size {map_size} is not a power of two from 8 up: give 64, 128, 256, ...")
     budget = args.budget_ms if args.budget_ms is not None else pr.budget_ms
     if args.sweep is not None:
         entries = [e for e in args.sweep.split(",") if e.strip()]
@@ -331,9 +330,10 @@ def cmd_profile(args: argparse.Namespace) -> int:
     runs, poses = [], {}
     for b in bakes:
         with progress_bar(f"baking {method} maps in the loop, tile {b.label}", 1.0) as update:
-            runs.append(run_profile(ar, response.linear[:, 1], probe, objects, b, budget, args.max_frames or pr.max_frames,
-                                    out / (f"tile_{b.label}" if len(bakes) > 1 else "."), settings, poses=poses,
-                                    progress=lambda f: update(completed=f)))
+            records = run_profile(ar, response.linear[:, 1], probe, objects, b, budget, args.max_frames or pr.max_frames,
+                                  out / (f"tile_{b.label}" if len(bakes) > 1 else "."), settings, poses=poses,
+                                  progress=lambda f: update(completed=f))
+            runs.append(ProfileRun(b.label, b.method, budget, records))
     write_profile(runs, out)
     for run in runs:
         s = run.summary()
@@ -369,13 +369,9 @@ def cmd_convert(args: argparse.Namespace) -> int:
 # arsim bake, arsim compare-methods
 
 
-def _is_map_size(n: int) -> bool:
-    return n >= 8 and n & (n - 1) == 0
-
-
 def _map_size(text: str) -> int:
     value = _size(text)
-    if not _is_map_size(value):
+    if not is_map_size(value):
         raise argparse.ArgumentTypeError(f"size {value} is not allowed: maps need a power of two from 8 up (64, 128, 256, 512, ...)")
     return value
 
@@ -416,7 +412,7 @@ def _probe(path: Path, size: int | None) -> np.ndarray:
     image, _ = replace_nonfinite(read_hdr(path), "refuse", str(path))
     layout = detect_layout(image, str(path))
     if layout == "anglemap" and size in (None, image.shape[0]):
-        if not _is_map_size(image.shape[0]):
+        if not is_map_size(image.shape[0]):
             raise ArsimError(f"{path}: angle map size {image.shape[0]} is not a power of two from 8 up; pass --size 256 (or 512, ...)")
         return image
     return to_layout(image, "anglemap", size or 512)
@@ -739,7 +735,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frame budget in ms (default: [profile] budget_ms, 33.3)")
     p.add_argument("--tile", metavar="N|auto", help="tile side baked per frame, or auto (default: [profile] tile, auto)")
     p.add_argument("--sweep", metavar="LIST", help="run each tile policy, e.g. 32,64,128,auto, and tabulate them")
-    p.add_argument("--bake", choices=("accurate", "bounds", "sh"), help="method of the maps baked (default: [profile] bake, accurate)")
+    p.add_argument("--bake", choices=LOOP_METHODS, help="method of the maps baked (default: [profile] bake, accurate)")
     p.add_argument("--max-frames", type=_positive("--max-frames"), metavar="K",
                    help="stop after K frames even if the bake is not complete (default: [profile] max_frames)")
     p.set_defaults(run=cmd_profile)

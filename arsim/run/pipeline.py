@@ -78,8 +78,11 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     """Run every stage into out; returns the manifest (also written to out/manifest.json)."""
     from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
     from arsim.capture.response import response_error
-    from arsim.evaluate.capture_report import filled, write_capture
+    from arsim.capture.accumulate import filled
+    from arsim.evaluate.capture_report import write_capture
+    from arsim.evaluate.diff import masked_flip
     from arsim.evaluate.profile import ProfileRun, write_profile
+    from arsim.evaluate.session import session_metrics
     from arsim.lighting.bake_output import write_bake
     from arsim.lighting.methods import MapParameters, bake
     from arsim.render.content import light_objects, scene_objects
@@ -163,18 +166,18 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     session_settings = SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay, flip_every=r.flip_every)
     with step("session", "4/5 rendering the AR session") as update:
         session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe),
-                              session_settings, truth_objects=light_objects(objects, truth),
+                              masked_flip, session_settings, truth_objects=light_objects(objects, truth),
                               progress=lambda f: update(completed=f))
     (out / "profile").mkdir(exist_ok=True)
     write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")
 
     # 5. Metrics, report and manifest.
-    session_metrics = session.metrics()
+    tracking, session_figures = session_metrics(ar, session)
     metrics = {"capture": {k: v for k, v in capture_metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
-               "maps": map_metrics, "session": session_metrics}
+               "maps": map_metrics, "session": session_figures}
     write_text_atomic(out / "metrics.json", json_text(metrics))
     with step("report", "5/5 writing the report") as update:
-        write_report(out, scenario, source, metrics, session, maps)
+        write_report(out, scenario, source, metrics, tracking, session.frames, maps)
     manifest = {
         "scenario": {"source": source, "name": scenario.run.name, "resolved": "scenario.toml"},
         "seed": scenario.run.seed,
