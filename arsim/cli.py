@@ -229,10 +229,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.maps:  # maps baked before (`arsim bake`), one folder per method
         maps = {}
         for folder in args.maps:
-            name, baked = read_bake(folder)
-            maps.setdefault(name, {}).update(baked)
+            baked = read_bake(folder)
+            maps[baked.method] = maps[baked.method].merged(baked) if baked.method in maps else baked
         check_maps(maps, maps_needed(objects, method))
-        sizes = {m.shape[0] for ms in maps.values() for m in ms.values()}
+        sizes = {m.size for m in maps.values()}
         if len(sizes) > 1:
             raise ArsimError(f"the --maps folders hold maps of sizes {sorted(sizes)}; give maps of one size")
         map_size = sizes.pop()

@@ -81,3 +81,13 @@ def test_every_consumer_takes_the_map_methods_from_one_list():
         else:
             with pytest.raises(ArsimError, match="cannot run in the frame loop"):
                 BakeSettings(name).check(64)
+
+
+def test_each_stage_declares_its_public_names_and_they_resolve():
+    import importlib
+
+    for stage in RANK:
+        package = importlib.import_module(f"arsim.{stage}")
+        assert package.__all__, stage
+        for name in package.__all__:
+            assert getattr(package, name) is not None, f"arsim.{stage}.{name}"

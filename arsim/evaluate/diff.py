@@ -160,7 +160,7 @@ def run_diff(a: Path, b: Path, out_dir: Path | None = None, max_flip: float = DE
     """Compare b against a; with out_dir, write heatmaps/<frame>.png for the frames that differ,
     diff.json and index.html (a, b and the heatmap side by side)."""
     if max_flip < 0:
-        raise ArsimError(f"--max-flip {max_flip} is negative; give 0 (any difference fails) or more")
+        raise ArsimError(f"the FLIP limit {max_flip} is negative; give 0 (any difference fails) or more")
     pairs, only_a, only_b = image_pairs(a, b)
     result = DiffResult(str(a), str(b), max_flip, only_in_a=only_a, only_in_b=only_b)
     if out_dir is not None:

@@ -21,6 +21,7 @@ from arsim.core.errors import ArsimError
 from arsim.core.files import atomic_path, write_bytes_atomic
 from arsim.core.gl import create_gl_context
 from arsim.core.png import png_bytes
+from arsim.lighting.mapset import MapSet
 from arsim.lighting.methods import bake
 from arsim.render.baking import BakeSettings, LoopBaker
 from arsim.render.content import light_objects
@@ -67,17 +68,17 @@ def maps_needed(objects: Sequence[SceneObject], method: str) -> dict[str, list[f
     return {name: sorted(exponents) for name, exponents in needed.items()}
 
 
-def session_maps(env: np.ndarray, needed: dict[str, list[float]]) -> dict[str, dict[float, np.ndarray]]:
-    """The maps of every method the objects need, computed from the angle map env."""
-    return {name: dict(zip(exponents, bake(env, exponents, name).maps)) for name, exponents in needed.items()}
+def session_maps(env: np.ndarray, needed: dict[str, list[float]], source: str = "") -> dict[str, MapSet]:
+    """The maps of every method the objects need, computed from the angle map env (source: what it is)."""
+    return {name: MapSet.of(name, exponents, bake(env, exponents, name).maps, source) for name, exponents in needed.items()}
 
 
-def check_maps(maps: dict[str, dict[float, np.ndarray]], needed: dict[str, list[float]]) -> None:
+def check_maps(maps: dict[str, MapSet], needed: dict[str, list[float]]) -> None:
     """ArsimError naming what is missing where given maps lack a method or an exponent the objects need."""
     for name, exponents in needed.items():
         missing = [s for s in exponents if s not in maps.get(name, {})]
         if missing:
-            held = "; ".join(f"{m}: {', '.join(f'{s:g}' for s in sorted(ms))}" for m, ms in maps.items()) or "none"
+            held = "; ".join(f"{m}: {', '.join(f'{s:g}' for s in ms.exponents)}" for m, ms in maps.items()) or "none"
             spec = ",".join(f"{s:g}" for s in exponents)
             raise ArsimError(f"no {name} maps for exponent {', '.join(f'{s:g}' for s in missing)} among the maps given "
                              f"({held}); bake them: arsim bake PROBE.exr -o DIR --method {name} --spec {spec}")
@@ -90,19 +91,20 @@ def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray) -> tuple:
     return camera, TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
 
 
-def _renderer(camera, maps: dict, ctx, method: str, objects: list[SceneObject]) -> Renderer:
-    renderer = Renderer(camera, maps, ctx, method=method)
+def _renderer(camera, maps: dict[str, MapSet], ctx, method: str, objects: list[SceneObject]) -> Renderer:
+    renderer = Renderer(camera, maps.values(), ctx, method=method)
     for obj in objects:
         renderer.add(obj)
     return renderer
 
 
-def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_maps: dict, out_dir: Path,
+def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapSet], truth_maps: dict[str, MapSet],
+                out_dir: Path,
                 objects: list[SceneObject], score: Scorer, settings: SessionSettings = SessionSettings(),
                 truth_objects: list[SceneObject] | None = None,
                 progress: Callable[[float], None] = lambda fraction: None) -> SessionResult:
     """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
-    (per method, per exponent: from the captured probe, or baked before) and truth frames lit by
+    (a set per method: from the captured probe, or baked before) and truth frames lit by
     `truth_maps` (the same from the true environment), each frame scored against its truth frame by
     `score`; writes frames/*.png and session.mp4 into out_dir. truth_objects: the objects as the truth
     frames show them, where their directional light maps were baked from the true environment

@@ -76,6 +76,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.evaluate.profile import ProfileRun, write_profile
     from arsim.evaluate.session import session_metrics
     from arsim.lighting.bake_output import write_bake
+    from arsim.lighting.mapset import MapSet
     from arsim.lighting.methods import MapParameters, bake
     from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, maps_needed, run_session
@@ -137,8 +138,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             (out / "maps" / name).mkdir(parents=True, exist_ok=True)
             write_bake(out / "maps" / name, exponents, name, params, baked, "capture/env.exr")
             true_maps = reference if name == "accurate" else bake(truth, exponents, name, params, gl=gl).maps
-            maps[name] = dict(zip(exponents, baked.maps))
-            truth_maps[name] = dict(zip(exponents, true_maps))
+            maps[name] = MapSet.of(name, exponents, baked.maps, "capture/env.exr")
+            truth_maps[name] = MapSet.of(name, exponents, true_maps, "truth")
             map_metrics[name] = {
                 "seconds": baked.seconds_total,
                 "per_exponent": {f"{s:g}": {

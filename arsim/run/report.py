@@ -14,6 +14,7 @@ import numpy as np
 from arsim.core.files import atomic_path, write_text_atomic
 from arsim.evaluate.compare_methods import maps_grid
 from arsim.evaluate.tracking import TrackingRun
+from arsim.lighting.mapset import MapSet
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
@@ -63,10 +64,10 @@ def plot_tracking(t: TrackingRun, frames: np.ndarray, path: Path) -> None:
 
 
 def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, tracking: TrackingRun, frames: np.ndarray,
-                 maps: dict) -> Path:
+                 maps: dict[str, MapSet]) -> Path:
     report = out / "report"
     report.mkdir(exist_ok=True)
-    exponents = sorted(next(iter(maps.values())))
+    exponents = next(iter(maps.values())).exponents
     maps_grid({name: np.stack([m[s] for s in exponents]) for name, m in maps.items()}, exponents, report / "maps.png",
               "Irradiance (s = 1) and reflection maps baked from the captured probe")
     plot_tracking(tracking, frames, report / "tracking.png")

@@ -89,8 +89,8 @@ def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map
     ar, probe, response = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None, stage=stage)
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
     with stage(f"computing the maps ({', '.join(needed)})"):
-        maps = maps if maps is not None else session_maps(probe, needed)
-        truth_maps = session_maps(truth, needed)
+        maps = maps if maps is not None else session_maps(probe, needed, source)
+        truth_maps = session_maps(truth, needed, "truth")
     with stage(f"rendering the AR session ({', '.join(needed)} maps)") as update:
         session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), masked_flip,
                               settings, truth_objects=light_objects(objects, truth), progress=lambda f: update(completed=f))
