@@ -13,8 +13,9 @@ import numpy as np
 
 from arsim import __version__
 from arsim.core.assets import assets_dir, bundled_scenarios
+from arsim.core.conventions import is_map_size
 from arsim.core.errors import ArsimError
-from arsim.core.files import json_text, write_text_atomic
+from arsim.core.files import json_text
 from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
 from arsim.core.image_stats import image_stats
 from arsim.core.progress import progress_bar
@@ -23,7 +24,7 @@ from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_com
 from arsim.evaluate.diff import DEFAULT_MAX_FLIP
 from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
 from arsim.lighting.bake_output import write_bake
-from arsim.lighting.methods import DEFAULT_EXPONENTS, METHODS, MapParameters, bake, method
+from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake, method
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 from arsim.sensors.recording import load_recording, record, recording_segments
 
@@ -35,6 +36,13 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+@contextlib.contextmanager
+def _bar(description: str):
+    """A stage's progress bar (on a terminal), for the library's stages."""
+    with progress_bar(description, 1.0) as update:
+        yield update
 
 
 def _command(sub, name: str, summary: str, example: str) -> argparse.ArgumentParser:
@@ -170,11 +178,8 @@ def cmd_record(args: argparse.Namespace) -> int:
 def cmd_capture(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
-    from arsim.capture.response import response_error
-    from arsim.evaluate.capture_report import write_capture
-    from arsim.scenario.environment import load_environment
-    from arsim.sensors.camera import ResponseCurve
+    from arsim.capture.pipeline import CaptureSettings, recording_scenario
+    from arsim.run.stages import measured_capture
 
     source = args.source
     if source is not None and source.is_dir():
@@ -188,14 +193,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
         with progress_bar("recording the capture sweep", 1.0) as update:
             record(scenario, out / "recording", progress=lambda f: update(completed=f))
         rec = load_recording(out / "recording")
-    scenario = recording_scenario(rec)
-    settings = CaptureSettings.of(scenario, args.size, args.align_every)
-    with progress_bar("capturing", 1.0) as update:
-        result = capture(rec, settings, progress=lambda f, c: update(completed=f, description=f"capturing: {100 * c:.1f} % covered"))
-    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=settings.size))
-    cam = scenario.device.camera
-    true_response = ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
-    metrics = write_capture(result, truth, response_error(result.response, true_response), out)
+    settings = CaptureSettings.of(recording_scenario(rec), args.size, args.align_every)
+    _, metrics = measured_capture(rec, settings, out, _bar)
     for warning in metrics["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"captured {metrics['frames']} frames at {metrics['frames_per_second']:.1f} frames/s into {out / 'env.exr'}: "
@@ -211,33 +210,11 @@ def cmd_capture(args: argparse.Namespace) -> int:
 # arsim render
 
 
-def _session_inputs(scenario, out: Path, env: Path | None, map_size: int, capture_probe: bool = True):
-    """What an AR session needs: the scenario recorded into out/recording, its AR part, the light probe
-    (the --env file, else captured from the sweep; None when not wanted) as a map_size angle map, and the
-    camera's response (from the capture, or from the sweep's burst)."""
-    from arsim.capture.pipeline import CaptureSettings, burst_response, capture
-    from arsim.evaluate.capture_report import filled
-    from arsim.sensors.camera import SensorSettings
-
-    probe = _probe(env, map_size) if env is not None else None  # read early: a bad file fails first
-    with progress_bar("recording the sweep and the AR path", 1.0) as update:
-        record(scenario, out / "recording", progress=lambda f: update(completed=f))
-    sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
-    if probe is None and capture_probe:
-        with progress_bar("capturing the light probe", 1.0) as update:
-            result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
-        acc = result.accumulator
-        return ar, to_layout(filled(acc.probe(), acc.covered()), "anglemap", map_size), result.response
-    return ar, probe, burst_response(sweep, SensorSettings.of(scenario.device.camera))
-
-
 def cmd_render(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from arsim.lighting.bake_output import read_bake
-    from arsim.render.content import light_objects, scene_objects
-    from arsim.render.session import SessionSettings, check_maps, maps_needed, run_session, session_maps
-    from arsim.scenario.environment import load_environment
+    from arsim.render.content import scene_objects
+    from arsim.render.session import SessionSettings, check_maps, maps_needed
+    from arsim.run.stages import render_session
 
     scenario = load_scenario(args.scenario)
     if not scenario.ar.enabled:
@@ -245,40 +222,28 @@ def cmd_render(args: argparse.Namespace) -> int:
     recording_segments(scenario)
     r = scenario.render
     method, map_size = args.method or r.method, args.map_size or r.map_size
-    if not _is_map_size(map_size):
-        raise ArsimError(f"[render] map_size {map_size} is not a power of two from 8 up: give 64, 128, 256, ...")
     if args.env is not None and args.maps:
         raise ArsimError("--env and --maps both give the light: pass one of them")
     objects = scene_objects(r)  # a mesh that cannot be read fails here, before any work
-    needed = maps_needed(objects, method)
     maps = None
     if args.maps:  # maps baked before (`arsim bake`), one folder per method
         maps = {}
         for folder in args.maps:
-            name, baked = read_bake(folder)
-            maps.setdefault(name, {}).update(baked)
-        check_maps(maps, needed)
-        sizes = {m.shape[0] for ms in maps.values() for m in ms.values()}
+            baked = read_bake(folder)
+            maps[baked.method] = maps[baked.method].merged(baked) if baked.method in maps else baked
+        check_maps(maps, maps_needed(objects, method))
+        sizes = {m.size for m in maps.values()}
         if len(sizes) > 1:
             raise ArsimError(f"the --maps folders hold maps of sizes {sorted(sizes)}; give maps of one size")
         map_size = sizes.pop()
-    out = _output_dir(args.output)
-    ar, probe, response = _session_inputs(scenario, out, args.env, map_size, capture_probe=maps is None)
-    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
-    with progress_bar(f"computing the maps ({', '.join(needed)})", 1.0) as update:
-        maps = maps if maps is not None else session_maps(probe, needed)
-        truth_maps = session_maps(truth, needed)
+    probe = _probe(args.env, map_size) if args.env is not None else None  # read early: a bad file fails first
     log_average = r.log_average if args.log_average is None else args.log_average
     overlay = r.overlay if args.overlay is None else args.overlay
     settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay,
                                flip_every=r.flip_every)
-    with progress_bar(f"rendering the AR session ({', '.join(needed)} maps)", 1.0) as update:
-        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), settings,
-                              truth_objects=light_objects(objects, truth), progress=lambda f: update(completed=f))
     source = str(args.env) if args.env is not None else ", ".join(map(str, args.maps)) if args.maps else "captured"
-    metrics = session.metrics() | {"method": method, "methods": needed, "map_size": map_size, "log_average": log_average,
-                                   "probe": source}
-    write_text_atomic(out / "metrics.json", json_text(metrics))
+    out = _output_dir(args.output)
+    metrics = render_session(scenario, out, settings, map_size, probe, maps, source, _bar, objects)
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: {_tracking_p95(metrics)}; "
           f"FLIP against the truth frame {metrics['flip_mean']:.4f}; metrics in {out / 'metrics.json'}")
     return 0
@@ -298,11 +263,10 @@ def _tile_policy(text: str) -> int | None:
 
 
 def cmd_profile(args: argparse.Namespace) -> int:
-
-    from arsim.evaluate.profile import sweep_table, write_profile
+    from arsim.evaluate.profile import sweep_table
     from arsim.render.baking import BakeSettings
     from arsim.render.content import scene_objects
-    from arsim.render.session import SessionSettings, run_profile
+    from arsim.run.stages import profile_session
 
     scenario = load_scenario(args.scenario)
     if not scenario.ar.enabled:
@@ -310,8 +274,6 @@ def cmd_profile(args: argparse.Namespace) -> int:
     recording_segments(scenario)
     r, pr = scenario.render, scenario.profile
     map_size = args.map_size or r.map_size
-    if not _is_map_size(map_size):
-        raise ArsimError(f"[render] map_size {map_size} is not a power of two from 8 up: give 64, 128, 256, ...")
     budget = args.budget_ms if args.budget_ms is not None else pr.budget_ms
     if args.sweep is not None:
         entries = [e for e in args.sweep.split(",") if e.strip()]
@@ -325,16 +287,9 @@ def cmd_profile(args: argparse.Namespace) -> int:
     for b in bakes:
         b.check(map_size)  # a tile that does not divide the maps fails here, before any work
     objects = scene_objects(r)
+    probe = _probe(args.env, map_size) if args.env is not None else None  # read early: a bad file fails first
     out = _output_dir(args.output)
-    ar, probe, response = _session_inputs(scenario, out, args.env, map_size)
-    settings = SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True)
-    runs, poses = [], {}
-    for b in bakes:
-        with progress_bar(f"baking {method} maps in the loop, tile {b.label}", 1.0) as update:
-            runs.append(run_profile(ar, response.linear[:, 1], probe, objects, b, budget, args.max_frames or pr.max_frames,
-                                    out / (f"tile_{b.label}" if len(bakes) > 1 else "."), settings, poses=poses,
-                                    progress=lambda f: update(completed=f)))
-    write_profile(runs, out)
+    runs = profile_session(scenario, out, bakes, budget, args.max_frames or pr.max_frames, map_size, probe, _bar, objects)
     for run in runs:
         s = run.summary()
         bake = s["bake"]
@@ -369,13 +324,9 @@ def cmd_convert(args: argparse.Namespace) -> int:
 # arsim bake, arsim compare-methods
 
 
-def _is_map_size(n: int) -> bool:
-    return n >= 8 and n & (n - 1) == 0
-
-
 def _map_size(text: str) -> int:
     value = _size(text)
-    if not _is_map_size(value):
+    if not is_map_size(value):
         raise argparse.ArgumentTypeError(f"size {value} is not allowed: maps need a power of two from 8 up (64, 128, 256, 512, ...)")
     return value
 
@@ -416,7 +367,7 @@ def _probe(path: Path, size: int | None) -> np.ndarray:
     image, _ = replace_nonfinite(read_hdr(path), "refuse", str(path))
     layout = detect_layout(image, str(path))
     if layout == "anglemap" and size in (None, image.shape[0]):
-        if not _is_map_size(image.shape[0]):
+        if not is_map_size(image.shape[0]):
             raise ArsimError(f"{path}: angle map size {image.shape[0]} is not a power of two from 8 up; pass --size 256 (or 512, ...)")
         return image
     return to_layout(image, "anglemap", size or 512)
@@ -533,12 +484,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = _output_dir(args.output)
     source = str(args.scenario) if args.scenario is not None else "the embedded default scenario"
 
-    @contextlib.contextmanager
-    def stage(description):
-        with progress_bar(description, 1.0) as update:
-            yield update
-
-    manifest = run_scenario(scenario, source, out, args.recording, stage)
+    manifest = run_scenario(scenario, source, out, args.recording, _bar)
     s = manifest["metrics"]["session"]
     print(f"run {scenario.run.name} in {out}: {s['frames_total']} frames ({s['frames_lost']} with the tag lost), "
           f"{_tracking_p95(s)}, FLIP against the truth frame {s['flip_mean']:.4f}; report {out / 'report' / 'index.html'}")
@@ -739,7 +685,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frame budget in ms (default: [profile] budget_ms, 33.3)")
     p.add_argument("--tile", metavar="N|auto", help="tile side baked per frame, or auto (default: [profile] tile, auto)")
     p.add_argument("--sweep", metavar="LIST", help="run each tile policy, e.g. 32,64,128,auto, and tabulate them")
-    p.add_argument("--bake", choices=("accurate", "bounds", "sh"), help="method of the maps baked (default: [profile] bake, accurate)")
+    p.add_argument("--bake", choices=LOOP_METHODS, help="method of the maps baked (default: [profile] bake, accurate)")
     p.add_argument("--max-frames", type=_positive("--max-frames"), metavar="K",
                    help="stop after K frames even if the bake is not complete (default: [profile] max_frames)")
     p.set_defaults(run=cmd_profile)

@@ -21,7 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from arsim.capture.pipeline import CaptureSettings, capture, read_frame, recording_scenario
+from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
+
+from arsim.core.png import read_frame
 from arsim.sensors.recording import load_recording
 
 

@@ -23,6 +23,7 @@ from arsim.core.resample import to_layout
 from arsim.evaluate.compare_bases import entries
 from arsim.lighting.fast import fast_maps
 from arsim.render.content import scene_objects
+from arsim.lighting.mapset import MapSet
 from arsim.render.renderer import Renderer
 from arsim.scenario.sections import Scenario
 from arsim.sensors.recording import ar_path
@@ -55,7 +56,7 @@ def main() -> None:
     env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", 256)
     torus = next(o for o in scene_objects(scenario.render) if o.material.normal_map is not None)
     exponents = [1.0, torus.material.exponent]
-    maps = dict(zip(exponents, fast_maps(env, exponents)))
+    maps = MapSet.of("fast", exponents, fast_maps(env, exponents))
     ctx = create_gl_context()
     camera = CameraIntrinsics.from_fov(args.width, args.height, scenario.device.camera.hfov_deg)
     path = ar_path(scenario)

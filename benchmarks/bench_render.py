@@ -19,6 +19,7 @@ from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.lighting.fast import fast_maps
 from arsim.render.content import scene_objects
+from arsim.lighting.mapset import MapSet
 from arsim.render.renderer import Renderer
 from arsim.scenario.sections import Scenario
 from arsim.sensors.recording import ar_path
@@ -35,7 +36,7 @@ def main() -> None:
     env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", 256)
     objects = scene_objects(scenario.render)
     exponents = sorted({1.0} | {o.material.exponent for o in objects})
-    maps = dict(zip(exponents, fast_maps(env, exponents)))
+    maps = MapSet.of("fast", exponents, fast_maps(env, exponents))
     ctx = create_gl_context()
     camera = CameraIntrinsics.from_fov(args.width, args.height, scenario.device.camera.hfov_deg)
     renderer = Renderer(camera, maps, ctx)

@@ -18,8 +18,9 @@ import numpy as np
 
 from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
 from arsim.core.resample import to_layout
-from arsim.evaluate.capture_report import filled
+from arsim.capture.accumulate import filled
 from arsim.render.content import scene_objects
+from arsim.evaluate.diff import masked_flip
 from arsim.render.session import SessionSettings, maps_needed, run_session, session_maps
 from arsim.scenario.environment import load_environment
 from arsim.sensors.recording import load_recording
@@ -46,7 +47,7 @@ def main() -> None:
         needed = maps_needed(objects, method)
         with tempfile.TemporaryDirectory() as tmp:
             session = run_session(ar, result.response.linear[:, 1], session_maps(probe, needed), session_maps(truth, needed),
-                                  Path(tmp), objects, SessionSettings(method, every=args.every))
+                                  Path(tmp), objects, masked_flip, SessionSettings(method, every=args.every))
         flip = session.flip[np.isfinite(session.flip)]
         print(f"| {method} | {flip.mean():.4f} | {flip.max():.4f} | {time.perf_counter() - start:.0f} |")
 

@@ -272,7 +272,7 @@ def _one_exposure_burst(rec):
 
 def _never_overlapping(rec):
     """Frames kept only where the true view has turned 70 degrees from the last kept one."""
-    from arsim.evaluate.recording_plots import frame_camera_orientations
+    from arsim.sensors.frames import frame_camera_orientations
     from arsim.sensors.recording import load_recording
 
     axes = frame_camera_orientations(load_recording(rec)).apply([0.0, 0.0, 1.0])

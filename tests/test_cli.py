@@ -139,3 +139,13 @@ def test_validate_prints_the_resolved_default_scenario():
     r = arsim("validate")
     assert r.returncode == 0
     assert "[environment]" in r.stdout and "interior.exr" in r.stdout and "probe_size = 512" in r.stdout
+
+
+@pytest.mark.parametrize("command", ["validate", "run", "batch"])
+def test_a_map_size_not_a_power_of_two_is_refused_where_the_scenario_is_read(tmp_path, command):
+    scenario = tmp_path / "maps.toml"
+    scenario.write_text("[render]\nmap_size = 100\n")
+    out = tmp_path / "out"
+    result = arsim(command, scenario, *(() if command == "validate" else ("-o", out)))
+    assert_one_line_error(result, "[render] map_size = 100", "power of two")
+    assert not out.exists()

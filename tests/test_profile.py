@@ -16,6 +16,7 @@ from arsim.lighting.accurate import accurate_maps
 from arsim.lighting.mipmap import mipmap_maps
 from arsim.render.baking import BakeSettings, LoopBaker
 from arsim.render.loop import FrameLoop, FrameRecord
+from arsim.lighting.mapset import MapSet
 from arsim.render.renderer import Renderer, overlay_image
 from tests.conftest import ENVMAPS
 from tests.test_cli import arsim, assert_one_line_error
@@ -31,7 +32,7 @@ def probe():
 
 def test_the_baked_maps_replace_the_ones_in_use_when_complete(probe):
     ctx = create_gl_context()
-    renderer = Renderer(CameraIntrinsics.from_fov(64, 48, 60.0), dict(zip(EXPONENTS, mipmap_maps(probe, EXPONENTS))), ctx,
+    renderer = Renderer(CameraIntrinsics.from_fov(64, 48, 60.0), MapSet.of("mipmap", EXPONENTS, mipmap_maps(probe, EXPONENTS)), ctx,
                         method="mipmap")
     baker = LoopBaker(probe, EXPONENTS, BakeSettings("accurate", tile=8), ctx)
     loop = FrameLoop(ctx, None, renderer, baker=baker)
@@ -77,7 +78,7 @@ def test_auto_bakes_every_tile(method):
 def test_the_progress_display_shows_black_tiles_while_baking(probe):
     ctx = create_gl_context()
     camera = CameraIntrinsics.from_fov(320, 240, 60.0)
-    renderer = Renderer(camera, dict(zip(EXPONENTS, mipmap_maps(probe, EXPONENTS))), ctx)
+    renderer = Renderer(camera, MapSet.of("mipmap", EXPONENTS, mipmap_maps(probe, EXPONENTS)), ctx)
     baker = LoopBaker(probe, EXPONENTS, BakeSettings("accurate", tile=8), ctx)
     baker.step(1000.0)  # the top-left quarter of the map
     renderer.background_pass(np.full((240, 320, 3), 128, np.uint8))

@@ -13,6 +13,7 @@ from arsim.core.resample import to_layout
 from arsim.lighting.fast import fast_maps
 from arsim.render import shading
 from arsim.render.meshes import uv_sphere
+from arsim.lighting.mapset import MapSet
 from arsim.render.renderer import Material, Renderer, SceneObject
 from tests.conftest import ENVMAPS
 
@@ -28,7 +29,7 @@ def gl():
 @pytest.fixture(scope="module")
 def maps():
     env = to_layout(read_hdr(ENVMAPS[1]), "anglemap", 128)
-    return dict(zip((1.0, 80.0), fast_maps(env, (1.0, 80.0))))
+    return MapSet.of("fast", (1.0, 80.0), fast_maps(env, (1.0, 80.0)))
 
 
 def look_at(eye, target):
@@ -217,19 +218,19 @@ def test_each_material_takes_its_own_methods_maps(gl, maps):
     material's exponent is refused."""
     from arsim.core.errors import ArsimError
 
-    dim = {s: m * 0.5 for s, m in maps.items()}  # a second 'method' whose maps are half as bright
+    dim = MapSet("mipmap", {s: m * 0.5 for s, m in maps.maps.items()})  # a second method, its maps half as bright
     view = look_at(np.array([0.05, 0.35, 0.3]), [0.0, 0.1, 0.0])
     model = np.eye(4)
     model[:3, 3] = [0.0, 0.1, 0.0]
     images = {}
     for method in ("fast", "mipmap"):
-        r = Renderer(CAMERA, {"fast": maps, "mipmap": dim}, gl, method="fast")
+        r = Renderer(CAMERA, [maps, dim], gl, method="fast")
         r.add(SceneObject(uv_sphere(0.1), Material(KD, KS, 80.0, method=method), model))
         r.render_objects(*view)
         images[method] = r.read_hdr()
     inside = r.read_mask() > 0.5
     np.testing.assert_allclose(images["mipmap"][inside], 0.5 * images["fast"][inside], rtol=2e-3)
-    r = Renderer(CAMERA, {"fast": maps, "mipmap": {1.0: dim[1.0]}}, gl)
+    r = Renderer(CAMERA, [maps, MapSet("mipmap", {1.0: dim[1.0]})], gl)
     with pytest.raises(ArsimError, match="no mipmap maps for exponent 80"):
         r.add(SceneObject(uv_sphere(0.1), Material(KD, KS, 80.0, method="mipmap"), model))
 

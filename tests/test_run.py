@@ -114,13 +114,13 @@ def test_diff_against_a_changed_exponent_fails_and_lights_up_that_object_only(ru
     # by FLIP's filters), in every frame where the two are apart on screen.
     import cv2
 
-    from arsim.evaluate.diff import read_image
+    from arsim.core.png import read_frame
 
     checked = 0
     for frame in summary["per_frame"]:
         name = frame["name"]
-        a, b = read_image(runs / "a" / "frames" / name), read_image(runs / "changed" / "frames" / name)
-        camera = read_image(runs / "a" / "recording" / "ar" / "frames" / name)
+        a, b = read_frame(runs / "a" / "frames" / name), read_frame(runs / "changed" / "frames" / name)
+        camera = read_frame(runs / "a" / "recording" / "ar" / "frames" / name)
         objects = cv2.dilate((a != camera).any(axis=-1).astype(np.uint8), np.ones((9, 9), np.uint8))
         count, labels = cv2.connectedComponents(objects)
         _, error = compare_images(a, b)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from arsim.capture.pipeline import burst_response, recording_scenario
-from arsim.evaluate.recording_plots import frame_positions
+from arsim.sensors.frames import frame_positions
 from arsim.evaluate.tracking import track_recording
 from arsim.sensors.camera import SensorSettings
 from arsim.sensors.recording import load_recording
@@ -68,8 +68,9 @@ def test_dark_frames_are_found_where_the_same_frames_well_exposed_are(ar_recordi
     """Frames with the tag in view, their exposure cut to an eighth and a sixteenth through the camera's
     response (as the auto-exposure's first frames are): not raised, the linearised codes lose the tag in
     most; raised, at least 90 % are found, at the corners of the well-exposed frames within a pixel."""
-    from arsim.capture.pipeline import read_frame
-    from arsim.evaluate.recording_plots import recording_camera, tag_in_view
+    from arsim.core.png import read_frame
+    from arsim.evaluate.recording_plots import tag_in_view
+    from arsim.sensors.frames import recording_camera
     from arsim.tracking.apriltag import TagTracker
 
     rec, linear = ar_recording

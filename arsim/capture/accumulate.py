@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numba
 import numpy as np
 from scipy import special
@@ -295,3 +296,19 @@ def accumulate_reference(size: int, camera: CameraIntrinsics, falloff: np.ndarra
     for k, values in enumerate([num, den, np.where(clipped, vote, 0.0), np.where(clipped, 0.0, vote), spread]):
         maps[k].reshape(-1, 3)[target] = values
     return tuple(maps)
+
+
+def filled(probe: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """The probe with uncovered disk texels filled from their covered surroundings (normalised
+    convolution at growing widths), so that maps can be computed from it."""
+    out = probe.astype(np.float32).copy()
+    have = covered.astype(np.float32)
+    sigma = 2.0
+    while (have < 1).any() and sigma < probe.shape[0]:
+        num = cv2.GaussianBlur(out * have[..., None], (0, 0), sigma)
+        den = cv2.GaussianBlur(have, (0, 0), sigma)
+        fill = (have < 1) & (den > 1e-3)
+        out[fill] = num[fill] / den[fill, None]
+        have = np.where(fill, 1.0, have)
+        sigma *= 2
+    return out * anglemap_disk_mask(probe.shape[0])[..., None]

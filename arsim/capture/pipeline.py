@@ -7,9 +7,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from pathlib import Path
 
-import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -20,10 +18,11 @@ from arsim.capture.drift import DriftFilter
 from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
 from arsim.capture.response import RecoveredResponse, calibrate_response
 from arsim.core.errors import ArsimError
-from arsim.evaluate.recording_plots import frame_camera_orientations, recording_camera
+from arsim.core.png import read_frame
 from arsim.scenario import Scenario
 from arsim.scenario.loader import parse_scenario
 from arsim.sensors.camera import SensorSettings, vignette
+from arsim.sensors.frames import frame_camera_orientations, recording_camera
 from arsim.sensors.fusion import KP
 from arsim.sensors.recording import Recording
 
@@ -61,13 +60,6 @@ class CaptureResult:
     @property
     def frames_per_second(self) -> float:
         return len(self.t_s) / self.seconds
-
-
-def read_frame(path: Path) -> np.ndarray:
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise ArsimError(f"{path}: cannot be read as an image; record again")
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
 def recording_scenario(rec: Recording) -> Scenario:

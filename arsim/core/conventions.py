@@ -222,6 +222,16 @@ def yaw_rotation(degrees: float) -> Rotation:
 OPENCV_TO_OPENGL = np.diag([1.0, -1.0, -1.0])
 
 
+def is_map_size(n: int) -> bool:
+    """Map and probe sides are powers of two from 8 up (the MIP chains and the tiles halve them)."""
+    return n >= 8 and n & (n - 1) == 0
+
+
+def map_size_problem(n: int) -> str | None:
+    """What is wrong with a map side, and how to fix it (None: nothing)."""
+    return None if is_map_size(n) else "is not a power of two from 8 up: give 64, 128, 256, 512, ..."
+
+
 @dataclass(frozen=True)
 class CameraIntrinsics:
     """OpenCV pinhole intrinsics with optional radial distortion (OpenCV's k1, k2); pixel (0, 0) is the

@@ -133,17 +133,19 @@ def read_hdr(path: str | os.PathLike) -> np.ndarray:
     return np.ascontiguousarray(rgb, dtype=np.float32)
 
 
-def replace_nonfinite(image: np.ndarray, policy: str, name: str = "image") -> tuple[np.ndarray, int]:
-    """Apply the NaN/Inf policy: 'refuse' raises if any texel is NaN or Inf, 'zero' sets those texels
-    (all channels of them) to 0. Returns the image and the number of texels replaced."""
+def replace_nonfinite(image: np.ndarray, policy: str, name: str = "image",
+                      fix: str = "pass --nan zero to replace them with 0") -> tuple[np.ndarray, int]:
+    """Apply the NaN/Inf policy: 'refuse' raises if any texel is NaN or Inf (the error says `fix`: how the
+    caller's user replaces them), 'zero' sets those texels (all channels of them) to 0. Returns the image
+    and the number of texels replaced."""
     if policy not in NONFINITE_POLICIES:
-        raise ArsimError(f"--nan {policy!r} is unknown; use one of {', '.join(NONFINITE_POLICIES)}")
+        raise ArsimError(f"NaN/Inf policy {policy!r} is unknown; use one of {', '.join(NONFINITE_POLICIES)}")
     bad = ~np.isfinite(image).all(axis=-1)
     count = int(bad.sum())
     if count == 0:
         return image, 0
     if policy == "refuse":
-        raise ArsimError(f"{name}: {count} texels are NaN or Inf; fix the source, or pass --nan zero to replace them with 0")
+        raise ArsimError(f"{name}: {count} texels are NaN or Inf; fix the source, or {fix}")
     out = image.copy()
     out[bad] = 0.0
     return out, count

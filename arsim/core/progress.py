@@ -22,3 +22,9 @@ def progress_bar(description: str, total: float) -> Iterator[Callable[..., None]
             bar.update(task, completed=completed, description=description)
 
         yield update
+
+
+@contextlib.contextmanager
+def quiet_stage(description: str) -> Iterator[Callable[..., None]]:
+    """A stage that shows nothing (runs in batch, in tests): update() does nothing."""
+    yield lambda completed=None, description=None: None

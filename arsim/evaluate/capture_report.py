@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from arsim.capture.accumulate import filled
 from arsim.capture.pipeline import CaptureResult
 from arsim.core.conventions import anglemap_disk_mask, anglemap_solid_angles
 from arsim.core.files import json_text, write_text_atomic
@@ -25,22 +26,6 @@ BRIGHTEST_MARGIN = 3  # and those within this many texels (about 2 degrees at 51
 
 def orientation_errors_deg(a: Rotation, b: Rotation) -> np.ndarray:
     return np.degrees((a.inv() * b).magnitude())
-
-
-def filled(probe: np.ndarray, covered: np.ndarray) -> np.ndarray:
-    """The probe with uncovered disk texels filled from their covered surroundings (normalised
-    convolution at growing widths), so that maps can be computed from it."""
-    out = probe.astype(np.float32).copy()
-    have = covered.astype(np.float32)
-    sigma = 2.0
-    while (have < 1).any() and sigma < probe.shape[0]:
-        num = cv2.GaussianBlur(out * have[..., None], (0, 0), sigma)
-        den = cv2.GaussianBlur(have, (0, 0), sigma)
-        fill = (have < 1) & (den > 1e-3)
-        out[fill] = num[fill] / den[fill, None]
-        have = np.where(fill, 1.0, have)
-        sigma *= 2
-    return out * anglemap_disk_mask(probe.shape[0])[..., None]
 
 
 def probe_map_errors(acc, truth: np.ndarray) -> tuple[list, np.ndarray]:

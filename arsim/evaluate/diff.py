@@ -21,7 +21,7 @@ import numpy as np
 
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_bytes_atomic, write_text_atomic
-from arsim.core.png import png_bytes
+from arsim.core.png import png_bytes, read_frame
 
 IMAGE_SUFFIXES = (".png",)
 DEFAULT_MAX_FLIP = 0.0  # a frame fails when its mean FLIP exceeds this: by default, any difference
@@ -86,16 +86,6 @@ class DiffResult:
         return "\n".join(lines)
 
 
-def read_image(path: Path) -> np.ndarray:
-    """(H, W, 3) uint8 RGB of an 8-bit PNG."""
-    import cv2
-
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise ArsimError(f"{path}: not an image arsim can read; give 8-bit PNG files")
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
-
-
 def frames_of(folder: Path) -> dict[str, Path]:
     """A run directory's frames (its frames/ folder) or a folder of images, by name."""
     source = folder / "frames" if (folder / "frames").is_dir() else folder
@@ -142,6 +132,13 @@ def flip_map(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> np.ndarray:
     return error
 
 
+def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
+    """Mean FLIP (LDR, sRGB inputs) of two 8-bit frames over the masked pixels, evaluated on the mask's
+    bounding box widened beyond FLIP's filters (the whole frame costs most of a second at 640 x 480): the
+    AR session's score of each frame against its truth frame."""
+    return float(flip_map(reference, test, mask)[mask].mean())
+
+
 def compare_images(a: np.ndarray, b: np.ndarray, name: str = "") -> tuple[FrameDiff, np.ndarray | None]:
     """The metrics of b against a (the reference), and the FLIP error map (H, W) where they differ."""
     if a.shape != b.shape:
@@ -163,13 +160,13 @@ def run_diff(a: Path, b: Path, out_dir: Path | None = None, max_flip: float = DE
     """Compare b against a; with out_dir, write heatmaps/<frame>.png for the frames that differ,
     diff.json and index.html (a, b and the heatmap side by side)."""
     if max_flip < 0:
-        raise ArsimError(f"--max-flip {max_flip} is negative; give 0 (any difference fails) or more")
+        raise ArsimError(f"the FLIP limit {max_flip} is negative; give 0 (any difference fails) or more")
     pairs, only_a, only_b = image_pairs(a, b)
     result = DiffResult(str(a), str(b), max_flip, only_in_a=only_a, only_in_b=only_b)
     if out_dir is not None:
         (out_dir / "heatmaps").mkdir(parents=True, exist_ok=True)
     for k, (name, path_a, path_b) in enumerate(pairs):
-        frame, error = compare_images(read_image(path_a), read_image(path_b), name)
+        frame, error = compare_images(read_frame(path_a), read_frame(path_b), name)
         if error is not None and out_dir is not None:
             heatmap = Path("heatmaps") / f"{Path(name).stem}.png"
             write_bytes_atomic(out_dir / heatmap, png_bytes(_magma(error)))

@@ -6,10 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
-from arsim.core.conventions import CameraIntrinsics
 from arsim.core.files import atomic_path
+from arsim.sensors.frames import frame_camera_orientations, frame_positions, recording_camera
 from arsim.sensors.coverage import fibonacci_directions, seen_by_views
 from arsim.sensors.fusion import tilt_error_deg, yaw_error_deg
 from arsim.sensors.recording import Recording
@@ -35,33 +34,6 @@ def _lon_lat(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Longitude (as the equirect's phi, degrees, 180 = +z) and latitude (degrees) of directions."""
     lon = np.degrees(np.mod(np.arctan2(d[:, 0], -d[:, 2]), 2 * np.pi))
     return lon, np.degrees(np.arcsin(np.clip(d[:, 1], -1, 1)))
-
-
-def recording_camera(rec: Recording) -> CameraIntrinsics:
-    cam = rec.meta["camera"]
-    return CameraIntrinsics(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"],
-                            cam.get("k1", 0.0), cam.get("k2", 0.0))
-
-
-def _frame_times(rec: Recording) -> np.ndarray:
-    """The frame times clipped to the ground truth's span (float64 ns)."""
-    t_truth = rec.groundtruth[0]
-    return np.clip(np.array([f["t_ns"] for f in rec.frames], dtype=np.float64), t_truth[0], t_truth[-1])
-
-
-def frame_camera_orientations(rec: Recording) -> Rotation:
-    """True camera-to-world rotations at the frame times, slerped between the ground truth's samples (taken
-    at the gyroscope's jittered times: the nearest sample is up to 5 ms off at 200 Hz, 0.27 degrees at the
-    capture sweep's 54 degrees/s)."""
-    t_truth = rec.groundtruth[0].astype(np.float64)
-    return Slerp(t_truth, rec.groundtruth[2])(_frame_times(rec)) * Rotation.from_matrix(np.array(rec.meta["camera_to_device"]))
-
-
-def frame_positions(rec: Recording) -> np.ndarray:
-    """True device positions (K, 3) at the frame times, interpolated linearly between the ground truth's samples."""
-    t_truth, positions = rec.groundtruth[0].astype(np.float64), rec.groundtruth[1]
-    t = _frame_times(rec)
-    return np.stack([np.interp(t, t_truth, positions[:, i]) for i in range(3)], axis=-1)
 
 
 def plot_coverage(rec: Recording, path: Path, samples: int = 20000) -> tuple[Path, float]:

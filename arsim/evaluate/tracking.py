@@ -10,9 +10,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from arsim.capture.pipeline import read_frame
+from arsim.core.png import read_frame
 from arsim.evaluate.capture_report import orientation_errors_deg
-from arsim.evaluate.recording_plots import frame_camera_orientations, frame_positions, recording_camera, tag_in_view
+from arsim.evaluate.recording_plots import tag_in_view
+from arsim.sensors.frames import frame_camera_orientations, frame_positions, recording_camera
 from arsim.sensors.recording import Recording
 from arsim.tracking.apriltag import TagPose, TagTracker
 

@@ -11,6 +11,7 @@ import numpy as np
 from arsim.core.errors import ArsimError
 from arsim.core.files import write_text_atomic
 from arsim.core.hdr_io import read_hdr, write_exr
+from arsim.lighting.mapset import MapSet
 from arsim.lighting.methods import BakeResult, MapParameters, parameters_used
 
 
@@ -44,9 +45,9 @@ def write_bake(out_dir: Path, exponents: Sequence[float], method: str, params: M
     return paths + [out_dir / "bake.json"]
 
 
-def read_bake(folder: Path) -> tuple[str, dict[float, np.ndarray]]:
-    """A bake folder written by write_bake: its method and its maps by exponent; ArsimError where the
-    folder is not one, or a map it lists is missing or of another size."""
+def read_bake(folder: Path) -> MapSet:
+    """A bake folder written by write_bake, as its map set; ArsimError where the folder is not one, or a map
+    it lists is missing or of another size."""
     record_path = folder / "bake.json"
     if not record_path.is_file():
         raise ArsimError(f"{folder}: no bake.json here; give a folder written by `arsim bake`")
@@ -62,4 +63,4 @@ def read_bake(folder: Path) -> tuple[str, dict[float, np.ndarray]]:
         if image.shape[:2] != (image.shape[0], image.shape[0]) or (maps and image.shape != next(iter(maps.values())).shape):
             raise ArsimError(f"{folder / name}: a {image.shape[1]} x {image.shape[0]} map among others; a bake's maps are one size")
         maps[exponent] = image.astype(np.float32)
-    return method, maps
+    return MapSet(method, maps, str(folder))

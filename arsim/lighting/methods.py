@@ -1,4 +1,7 @@
-"""The map methods by name, their parameters, and a timed bake of several exponents at once.
+"""The map methods by name (METHODS: the only list of them; the scenario's schema, the frame loop's baker
+and the command line take their choices from it), their parameters, and a timed bake of several exponents at
+once. A new method is one entry here: its functions, the parameters it reads, whether it has a GL path and
+whether it can bake inside the frame loop (README: Adding a map method).
 
 Every method takes an N x N angle map and Phong exponents and returns one float32 angle map per
 exponent (E, N, N, 3): s = 1 is the irradiance map (E / pi), s > 1 reflection maps (README: Conventions).
@@ -20,13 +23,14 @@ from arsim.lighting.mipmap import mipmap_maps
 from arsim.lighting.sh import MAX_ORDER, sh_coefficients, sh_maps
 
 DEFAULT_EXPONENTS = (1, 2, 10, 20, 40, 80, 160, 240, 320, 640, 1280)
+SH_ORDER = 35  # sh: bands 0..SH_ORDER-1, the thesis's order in its figures
 
 
 @dataclass(frozen=True)
 class MapParameters:
     """What the methods can be tuned with (each uses only its own)."""
 
-    sh_order: int = 35  # sh: bands 0..sh_order-1, the thesis's order in its figures
+    sh_order: int = SH_ORDER  # sh: bands 0..sh_order-1
     sh_faithful: bool = False  # sh: evaluate Y_lm as Alg. 2.5/2.6 (factorials in double)
     samples: int = 64  # mc: importance samples per texel
     seed: int = 0  # mc
@@ -34,9 +38,9 @@ class MapParameters:
 
     def check(self) -> None:
         if not 1 <= self.sh_order <= MAX_ORDER:
-            raise ArsimError(f"--sh-order {self.sh_order} is out of range: give 1 to {MAX_ORDER}")
+            raise ArsimError(f"SH order {self.sh_order} is out of range: give 1 to {MAX_ORDER}")
         if self.samples < 1:
-            raise ArsimError(f"--samples {self.samples} is out of range: give at least 1")
+            raise ArsimError(f"sample count {self.samples} is out of range: give at least 1")
         if not 0 < self.bounds_threshold < 1:
             raise ArsimError(f"bounds threshold {self.bounds_threshold} is out of range: give a value in (0, 1)")
 
@@ -50,6 +54,9 @@ class Method:
     summary: str
     prepare: Callable[[np.ndarray, Sequence[float], MapParameters], object]
     map: Callable[[np.ndarray, object, float, MapParameters], np.ndarray]
+    parameters: tuple[str, ...] = ()  # the MapParameters fields it reads (bake.json records those)
+    gl: bool = False  # a GL bake (gl_bake.py), held to this NumPy oracle within 1e-3 relative by the tests
+    in_loop: bool = False  # can bake tile by tile inside the frame loop (render/baking.py)
 
 
 def _sh_prepare(env, exponents, p):
@@ -64,18 +71,21 @@ METHODS = {
     m.name: m
     for m in (
         Method("accurate", "brute-force sum over every texel (Alg. 4.1/4.2), float64: the reference",
-               lambda env, ex, p: None, lambda env, _, s, p: accurate_maps(env, [s])[0]),
+               lambda env, ex, p: None, lambda env, _, s, p: accurate_maps(env, [s])[0], gl=True, in_loop=True),
         Method("bounds", "the accurate sum over the cone where the lobe exceeds a threshold (section 6.2.2)",
                lambda env, ex, p: None,
-               lambda env, _, s, p: accurate_maps(env, [s], bounds_threshold=p.bounds_threshold)[0]),
+               lambda env, _, s, p: accurate_maps(env, [s], bounds_threshold=p.bounds_threshold)[0],
+               ("bounds_threshold",), gl=True, in_loop=True),
         Method("fast", "exact texel sums through SH of the order each lobe needs (about a second at 512²)",
                _fast_prepare, lambda env, c, s, p: fast_maps(env, [s], coeffs=c)[0]),
         Method("mipmap", "trilinear lookup in a 2x2-box MIP chain at the level of eq. 4.2/4.3 (Alg. 4.3)",
                lambda env, ex, p: None, lambda env, _, s, p: mipmap_maps(env, [s])[0]),
         Method("sh", "spherical harmonics of --sh-order bands convolved with the Phong lobe (Alg. 4.4-4.7)",
-               _sh_prepare, lambda env, c, s, p: sh_maps(env, [s], p.sh_order, p.sh_faithful, coeffs=c)[0]),
+               _sh_prepare, lambda env, c, s, p: sh_maps(env, [s], p.sh_order, p.sh_faithful, coeffs=c)[0],
+               ("sh_order", "sh_faithful"), in_loop=True),
         Method("mc", "Monte Carlo importance sampling with MIP-filtered samples (Colbert and Krivanek)",
-               lambda env, ex, p: None, lambda env, _, s, p: mc_maps(env, [s], p.samples, p.seed)[0]),
+               lambda env, ex, p: None, lambda env, _, s, p: mc_maps(env, [s], p.samples, p.seed)[0],
+               ("samples", "seed")),
     )
 }
 
@@ -88,8 +98,7 @@ def method(name: str) -> Method:
 
 def parameters_used(name: str, params: MapParameters) -> dict:
     """The parameters that matter for a method (for bake.json and reports)."""
-    used = {"sh": ("sh_order", "sh_faithful"), "mc": ("samples", "seed"), "bounds": ("bounds_threshold",)}
-    return {k: v for k, v in asdict(params).items() if k in used.get(name, ())}
+    return {k: v for k, v in asdict(params).items() if k in method(name).parameters}
 
 
 @dataclass(frozen=True)
@@ -104,8 +113,8 @@ class BakeResult:
         return self.seconds_shared + sum(self.seconds_per_map)
 
 
-# Methods that have a GL bake (gl_bake.py), held to these NumPy oracles within 1e-3 relative by the tests.
-GL_METHODS = ("accurate", "bounds")
+GL_METHODS = tuple(name for name, m in METHODS.items() if m.gl)
+LOOP_METHODS = tuple(name for name, m in METHODS.items() if m.in_loop)  # what the frame loop can bake
 
 
 def bake(env: np.ndarray, exponents: Sequence[float], name: str, params: MapParameters | None = None,

@@ -16,8 +16,8 @@ import numpy as np
 from arsim.core.errors import ArsimError
 from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, Tile, tiles
 from arsim.lighting.gl_bake import GLAccurateBaker, GLShBaker
+from arsim.lighting.methods import LOOP_METHODS, SH_ORDER
 
-BAKE_METHODS = ("accurate", "bounds", "sh")
 # The tile side `auto` schedules in (or the map's side). Accurate, 512² probe, eight maps, 500 frames of
 # 20 ms on llvmpipe: tiles of 32 baked the most work per frame (16: a draw's fixed costs weigh more; 64:
 # a wider tile's pass visits 12 % more input texels).
@@ -51,12 +51,12 @@ class Piece:
 class BakeSettings:
     method: str = "accurate"  # accurate | bounds | sh
     tile: int | None = None  # a fixed tile side; None: auto
-    sh_order: int = 35
+    sh_order: int = SH_ORDER
     bounds_threshold: float = DEFAULT_BOUNDS_THRESHOLD
 
     def check(self, n: int) -> None:
-        if self.method not in BAKE_METHODS:
-            raise ArsimError(f"bake method '{self.method}' cannot run in the frame loop; use one of {', '.join(BAKE_METHODS)}")
+        if self.method not in LOOP_METHODS:
+            raise ArsimError(f"bake method '{self.method}' cannot run in the frame loop; use one of {', '.join(LOOP_METHODS)}")
         if self.tile is not None and (self.tile < 1 or n % self.tile != 0):
             raise ArsimError(f"tile size {self.tile} does not divide the {n} x {n} maps; give a divisor of {n} "
                              f"(e.g. {', '.join(str(d) for d in (16, 32, 64, 128) if n % d == 0 and d <= n)}) or auto")

@@ -9,6 +9,7 @@ Object space: y up, the object standing on the table plane y = 0.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -144,12 +145,27 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
     return model
 
 
-def parse_lighting(o) -> str:
+@dataclass(frozen=True)
+class ObjectLighting:
+    """An object's lighting, parsed once from its [[render.objects]] lighting string."""
+
+    kind: str  # "ibl", "lightmap-ao", "volume" or "inm" (a directional light map)
+    basis: str = ""  # inm: the basis and its count, e.g. "modh6"
+
+    @property
+    def inm(self) -> bool:
+        return self.kind == "inm"
+
+
+IBL = ObjectLighting("ibl")
+
+
+def parse_lighting(o) -> ObjectLighting:
     """An object's lighting ([[render.objects]] lighting): "ibl", "lightmap-ao", "volume" or
     "inm-<basis><count>" (checked: an unknown basis, a count it does not have, or more inm_terms, raises
     ArsimError)."""
     if o.lighting in ("ibl", "lightmap-ao", "volume"):
-        return "ibl" if o.lighting == "lightmap-ao" and not o.light_map else o.lighting
+        return IBL if o.lighting == "lightmap-ao" and not o.light_map else ObjectLighting(o.lighting)
     if not o.lighting.startswith("inm-"):
         raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\": use ibl, lightmap-ao, volume or inm-BASIS "
                          f"(e.g. inm-modh6, inm-h4, inm-sh9)")
@@ -159,7 +175,7 @@ def parse_lighting(o) -> str:
     basis, count = parse_basis(o.lighting[4:])
     if o.inm_terms > count:
         raise ArsimError(f"[[render.objects]] inm_terms = {o.inm_terms}: {o.lighting} has {count} terms; give 1 to {count} (0: all)")
-    return f"inm-{basis.name}{count}"
+    return ObjectLighting("inm", f"{basis.name}{count}")
 
 
 def disc(radius: float, rings: int = 16, segments: int = 96) -> Mesh:
@@ -186,7 +202,7 @@ def disc_texels(radius: float, size: int, offset: np.ndarray) -> Surface:
     return Surface(points, normals, tangents, valid)
 
 
-def _torus_object(o, x: float, z: float, lighting: str) -> SceneObject:
+def _torus_object(o, x: float, z: float, lighting: ObjectLighting) -> SceneObject:
     minor = 0.4 * o.size_m
     offset = np.array([x, 0.0, z])
     size = (o.lightmap_size, 2 * o.lightmap_size)
@@ -195,19 +211,16 @@ def _torus_object(o, x: float, z: float, lighting: str) -> SceneObject:
         points, normals, tangents = torus_texels(o.size_m, minor, size)
         return Surface(points + offset, normals, tangents, np.ones(size, bool))
 
-    material = Material(o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if lighting == "lightmap-ao" else None,
-                        ridges_normal_map() if o.normal_map else None, o.method,
-                        basis=lighting[4:] if lighting.startswith("inm-") else "", inm_terms=o.inm_terms or None)
+    material = Material(o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if lighting.kind == "lightmap-ao" else None,
+                        ridges_normal_map() if o.normal_map else None, o.method, basis=lighting.basis,
+                        inm_terms=o.inm_terms or None)
     return SceneObject(torus(o.size_m, minor), material, translation(x, 0.0, z), torus_lods(o.size_m, minor, 96),
                        lightmap_surface=texels, distance=lambda p: torus_distance(p - offset, o.size_m, minor))
 
 
-def _disc_object(o, x: float, z: float, lighting: str) -> SceneObject:
-    if lighting == "lightmap-ao":
-        lighting = "ibl"  # (the thesis bakes occlusion for the torus only)
-    offset = np.array([x, 0.0, z])
-    material = Material(o.kd, o.ks, o.exponent, method=o.method, basis=lighting[4:] if lighting.startswith("inm-") else "",
-                        inm_terms=o.inm_terms or None)
+def _disc_object(o, x: float, z: float, lighting: ObjectLighting) -> SceneObject:
+    offset = np.array([x, 0.0, z])  # (lightmap-ao: plain IBL, the thesis bakes occlusion for the torus only)
+    material = Material(o.kd, o.ks, o.exponent, method=o.method, basis=lighting.basis, inm_terms=o.inm_terms or None)
     return SceneObject(disc(o.size_m), material, translation(x, 0.0, z),
                        lightmap_surface=lambda: disc_texels(o.size_m, o.lightmap_size, offset))
 
@@ -234,7 +247,7 @@ def scene_objects(section) -> list[SceneObject]:
         else:
             objects.append(_torus_object(o, x, z, lighting))
         for k in range(added, len(objects)):
-            if lighting == "volume":
+            if lighting.kind == "volume":
                 material = dataclasses.replace(objects[k].material, volume_lit=True, light_map=None)
                 objects[k] = dataclasses.replace(objects[k], material=material)
             if o.orbit_m > 0:
@@ -257,13 +270,13 @@ def sphere_texels(radius: float, size: tuple[int, int], centre: np.ndarray) -> S
     return Surface(centre + radius * normals, normals, tangents, np.ones(size, bool))
 
 
-def _sphere_object(o, centre: np.ndarray, exponent: float, lighting: str, tessellation: tuple[int, int]) -> SceneObject:
+def _sphere_object(o, centre: np.ndarray, exponent: float, lighting: ObjectLighting,
+                   tessellation: tuple[int, int]) -> SceneObject:
     """A sphere of the scenario's (a row's: one of them) standing on the table at centre; with lighting =
-    inm-..., drawn as its mesh (the light map in its UVs), else ray-cast."""
-    if lighting == "lightmap-ao":
-        lighting = "ibl"  # (the thesis bakes occlusion for the torus only)
-    inm = lighting.startswith("inm-")
-    material = Material(o.kd, o.ks, exponent, method=o.method, basis=lighting[4:] if inm else "", inm_terms=o.inm_terms or None)
+    inm-..., drawn as its mesh (the light map in its UVs), else ray-cast (lightmap-ao: plain IBL, the thesis
+    bakes occlusion for the torus only)."""
+    inm = lighting.inm
+    material = Material(o.kd, o.ks, exponent, method=o.method, basis=lighting.basis, inm_terms=o.inm_terms or None)
     size = (o.lightmap_size, 2 * o.lightmap_size)
     return SceneObject(uv_sphere(o.size_m, *tessellation), material, translation(*centre), sphere=o.size_m,
                        distance=_sphere_distance(centre, o.size_m),
@@ -321,7 +334,7 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
     return out
 
 
-def mesh_object(o, lighting: str = "ibl") -> SceneObject:
+def mesh_object(o, lighting: ObjectLighting = IBL) -> SceneObject:
     """A mesh file's object: scaled so that its bounding box's largest side is size_m, standing on the
     table (its lowest point at y = 0) with its box centred over position_m; the ridges normal map where
     it has texture coordinates. With lighting = inm-..., a second UV set unwrapped for its directional
@@ -339,8 +352,8 @@ def mesh_object(o, lighting: str = "ibl") -> SceneObject:
     model[:3, :3] *= scale
     material = Material(o.kd, o.ks, o.exponent, None, ridges_normal_map() if o.normal_map and textured else None, o.method)
     surface = None
-    if lighting.startswith("inm-"):
+    if lighting.inm:
         mesh, shape = lightmap_unwrap(mesh, o.lightmap_size)
-        material = dataclasses.replace(material, basis=lighting[4:], inm_terms=o.inm_terms or None)
+        material = dataclasses.replace(material, basis=lighting.basis, inm_terms=o.inm_terms or None)
         surface = (lambda: lightmap_texels(mesh, model, shape))
     return SceneObject(mesh, material, model, lightmap_surface=surface, mesh_occludes=True)

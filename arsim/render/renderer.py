@@ -13,7 +13,7 @@ Images come back with row 0 at the top (OpenCV's convention); GL's framebuffer r
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 
@@ -26,6 +26,7 @@ from arsim.core.errors import ArsimError
 from arsim.core.gl import core_shader, create_gl_context
 from arsim.core.resample import extend_beyond_rim
 from arsim.lighting.bases import parse_basis
+from arsim.lighting.mapset import MapSet
 from arsim.render.meshes import Mesh
 from arsim.render.shading import TONEMAP_LUMA
 
@@ -201,19 +202,20 @@ def _power_of_two(n: int, least: int = 16) -> int:
 
 
 class Renderer:
-    """Renders virtual objects lit by angle maps: maps[method][1.0] the irradiance map, maps[method][s]
-    the reflection map for exponent s > 1; a material takes its method's maps. One method's maps may be
-    given as they are ({1.0: ..., 80.0: ...}: they are `method`'s, or the method ""). Materials that
-    name no method take `method` (default: the first in maps)."""
+    """Renders virtual objects lit by angle maps: per map set (one per method), its irradiance map (s = 1)
+    and reflection maps (s > 1); a material takes its method's maps. Materials that name no method take
+    `method` (default: the first set's)."""
 
-    def __init__(self, camera: CameraIntrinsics, maps: dict, ctx=None, debug: bool = False,
+    def __init__(self, camera: CameraIntrinsics, maps: MapSet | Iterable[MapSet], ctx=None, debug: bool = False,
                  near: float = 0.02, far: float = 50.0, method: str | None = None):
         self.ctx = ctx or create_gl_context()
         self.camera, self.debug, self.near = camera, debug, near
         self.projection = gl_projection_from_intrinsics(camera, near, far)
-        by_method = maps if all(isinstance(k, str) for k in maps) else {method or "": maps}
-        self.maps = {(name, float(s)): self._map_texture(m) for name, ms in by_method.items() for s, m in ms.items()}
-        self.default_method = next(iter(by_method)) if method is None else method
+        sets = [maps] if isinstance(maps, MapSet) else list(maps)
+        if not sets or not all(isinstance(m, MapSet) for m in sets):
+            raise TypeError("Renderer takes MapSets (arsim.lighting.mapset), one per method")
+        self.maps = {(m.method, s): self._map_texture(a) for m in sets for s, a in m.maps.items()}
+        self.default_method = sets[0].method if method is None else method
         self.objects: list[_Drawable] = []
         self.corners = np.zeros((0, 8, 4))  # per object, its world bounding box's corners
         self.tiles: dict[tuple[int, int], _Tile] = {}
@@ -264,14 +266,40 @@ class Renderer:
         return out
 
     def add(self, obj: SceneObject) -> None:
+        """Compile the object's shader variant, upload its geometry and textures, and keep it to draw."""
         m = obj.material
         method = m.method or self.default_method
-        missing = [s for s in (1.0, float(m.exponent)) if (method, s) not in self.maps]
+        self._check_maps(method, float(m.exponent))
+        defines, terms = self._variant(m)
+        scale = np.abs(np.linalg.eigvalsh(obj.model[:3, :3].T @ obj.model[:3, :3])).max() ** 0.5
+        program, vaos, sphere = self._geometry(obj, defines, scale)
+        errors = np.array([0.0] + [error * scale for _, error in obj.lods])[:len(vaos)]
+        textures = {"light_map": self._image_texture(m.light_map) if m.light_map is not None else None,
+                    "normal_map": self._image_texture(m.normal_map) if m.normal_map is not None else None,
+                    "coefficient_map": self._coefficient_texture(m.directional_map) if m.directional_map is not None else None}
+        if terms:
+            program["inm_terms"].value = terms
+        # What does not change from frame to frame, set once: each object has its own program.
+        program["kd"].value, program["ks"].value = tuple(m.kd), tuple(m.ks)
+        units = self._bind_units(program, method, m, textures)
+        texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
+                                                  max(tex.size[:2])) for name, tex in textures.items() if tex is not None}
+        corners = np.hstack([obj.corners(), np.ones((8, 1))])
+        self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere, obj.orbit, obj.model.copy()))
+        self.corners = np.stack([d.corners for d in self.objects])
+
+    def _check_maps(self, method: str, exponent: float) -> None:
+        """ArsimError naming what is held where the method has no irradiance map or none for the exponent."""
+        missing = [s for s in (1.0, exponent) if (method, s) not in self.maps]
         if missing:
             held = ", ".join(sorted({f"{name or 'default'}: " + ", ".join(f"{s:g}" for n, s in sorted(self.maps) if n == name)
                                      for name, _ in self.maps}))
             raise ArsimError(f"no {method or 'default'} maps for exponent {', '.join(f'{s:g}' for s in missing)} "
                              f"(the maps held: {held}); compute or load that method's maps for every exponent the objects use")
+
+    def _variant(self, m: Material) -> tuple[list[str], int]:
+        """The shader variant's defines for a material (its maps checked), and its directional light map's
+        terms (0: none)."""
         defines = (["LIGHT_MAP"] if m.light_map is not None else []) + (["NORMAL_MAP"] if m.normal_map is not None else [])
         terms = 0
         if m.directional_map is not None:
@@ -293,53 +321,48 @@ class Renderer:
             defines.append("VOLUME")
         defines += ["DEBUG"] if self.debug else []
         defines += ["FLOAT_FILTERING"] if "llvmpipe" in self.ctx.info["GL_RENDERER"] else []
-        scale = np.abs(np.linalg.eigvalsh(obj.model[:3, :3].T @ obj.model[:3, :3])).max() ** 0.5
-        sphere = None
+        return defines, terms
+
+    def _geometry(self, obj: SceneObject, defines: list[str], scale: float):
+        """The object's program and vertex arrays (one per level of detail): a ray-cast sphere's quad where
+        it is a plain sphere, else its meshes; and the sphere (centre, radius) or None."""
+        m = obj.material
         if obj.sphere is not None and m.light_map is None and m.normal_map is None and m.directional_map is None:
             # (an irradiance volume is read at the ray-cast hit: the impostor serves it too)
-            defines.append("SPHERE_IMPOSTOR")
+            defines = defines + ["SPHERE_IMPOSTOR"]
             program = self.ctx.program(vertex_shader=_source("sphere.vert", defines), fragment_shader=_source("object.frag", defines))
             quad = np.array([(-1, -1), (1, -1), (-1, 1), (-1, 1), (1, -1), (1, 1)], dtype="f4")  # counter-clockwise
             vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(quad.tobytes()), "2f", "in_corner")])]
             sphere = (obj.model[:3, 3].astype(np.float64), float(obj.sphere * scale))
             program["center"].value, program["radius"].value = tuple(sphere[0]), sphere[1]
-        else:
-            program = self.ctx.program(vertex_shader=_source("object.vert", defines), fragment_shader=_source("object.frag", defines))
-            sizes = {"in_position": 3, "in_normal": 3, "in_tangent": 3, "in_uv": 2, "in_uv2": 2}
-            used = [n for n in sizes if n in program]  # the compiler drops what a variant does not read
-            layout = " ".join(f"{k}f" if n in used else f"{k}x4" for n, k in sizes.items())
-            meshes = (obj.mesh, *(mesh for mesh, _ in obj.lods))
-            vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.interleaved().tobytes()), layout, *used)],
-                                          self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes())) for mesh in meshes]
-            program["model"].write(obj.model.T.astype("f4").tobytes())
-            program["normal_matrix"].write(np.linalg.inv(obj.model[:3, :3]).astype("f4").tobytes())  # (inverse transpose, column-major)
-        errors = np.array([0.0] + [error * scale for _, error in obj.lods])[:len(vaos)]
-        textures = {"light_map": self._image_texture(m.light_map) if m.light_map is not None else None,
-                    "normal_map": self._image_texture(m.normal_map) if m.normal_map is not None else None,
-                    "coefficient_map": self._coefficient_texture(m.directional_map) if m.directional_map is not None else None}
-        if terms:
-            program["inm_terms"].value = terms
-        volume_textures = []
-        if m.irradiance_volume is not None:
-            volume, low, high = m.irradiance_volume
-            volume_textures = self._volume_textures(np.asarray(volume))
-            program["volume_low"].value, program["volume_high"].value = tuple(map(float, low)), tuple(map(float, high))
-            program["volume_size"].value = tuple(float(n) for n in np.asarray(volume).shape[:3])
-        # What does not change from frame to frame, set once: each object has its own program.
-        program["kd"].value, program["ks"].value = tuple(m.kd), tuple(m.ks)
+            return program, vaos, sphere
+        program = self.ctx.program(vertex_shader=_source("object.vert", defines), fragment_shader=_source("object.frag", defines))
+        sizes = {"in_position": 3, "in_normal": 3, "in_tangent": 3, "in_uv": 2, "in_uv2": 2}
+        used = [n for n in sizes if n in program]  # the compiler drops what a variant does not read
+        layout = " ".join(f"{k}f" if n in used else f"{k}x4" for n, k in sizes.items())
+        meshes = (obj.mesh, *(mesh for mesh, _ in obj.lods))
+        vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.interleaved().tobytes()), layout, *used)],
+                                      self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes())) for mesh in meshes]
+        program["model"].write(obj.model.T.astype("f4").tobytes())
+        program["normal_matrix"].write(np.linalg.inv(obj.model[:3, :3]).astype("f4").tobytes())  # (inverse transpose, column-major)
+        return program, vaos, None
+
+    def _bind_units(self, program, method: str, m: Material, textures: dict) -> list:
+        """The textures the object's draws bind, in unit order (the method's maps, the material's own, its
+        irradiance volume's), each sampler of the program set to its unit."""
         units = [self.maps[method, 1.0], self.maps[method, float(m.exponent)]] + [t for t in textures.values() if t is not None]
         names = ["irradiance_map", "reflection_map"] + [n for n, t in textures.items() if t is not None]
         for unit, name in enumerate(names):
             if name in program:  # (a directional light map replaces the irradiance map: the compiler drops it)
                 program[name].value = unit
-        if volume_textures:
+        if m.irradiance_volume is not None:
+            volume, low, high = m.irradiance_volume
+            volume_textures = self._volume_textures(np.asarray(volume))
+            program["volume_low"].value, program["volume_high"].value = tuple(map(float, low)), tuple(map(float, high))
+            program["volume_size"].value = tuple(float(n) for n in np.asarray(volume).shape[:3])
             program["volume"].value = list(range(len(units), len(units) + len(volume_textures)))
             units += volume_textures
-        texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
-                                                  max(tex.size[:2])) for name, tex in textures.items() if tex is not None}
-        corners = np.hstack([obj.corners(), np.ones((8, 1))])
-        self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere, obj.orbit, obj.model.copy()))
-        self.corners = np.stack([d.corners for d in self.objects])
+        return units
 
     def _move(self, time_s: float) -> None:
         """The objects that move, placed where their orbits have them at time_s (model matrix, a sphere's

@@ -1,7 +1,8 @@
 """The AR session (thesis 5.1) over an AR recording, on the render loop (loop.py): `run_session` lights
 the objects with maps from the captured probe and renders beside each frame the truth frame, the same
-objects lit by maps from the true environment, with the FLIP difference between the two inside the mask;
-`run_profile` runs the loop lap after lap while step 3 bakes maps tile by tile, for the profiler.
+objects lit by maps from the true environment, scored against it inside the mask by the scorer it is given
+(the evaluation's FLIP); `run_profile` runs the loop lap after lap while step 3 bakes maps tile by tile, for
+the profiler. What the poses and the timings measure is the evaluation's (arsim.evaluate.session).
 """
 
 from __future__ import annotations
@@ -15,21 +16,20 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from arsim.capture.pipeline import read_frame
+from arsim.core.png import read_frame
 from arsim.core.errors import ArsimError
 from arsim.core.files import atomic_path, write_bytes_atomic
 from arsim.core.gl import create_gl_context
 from arsim.core.png import png_bytes
-from arsim.evaluate.profile import ProfileRun
-from arsim.evaluate.recording_plots import recording_camera
-from arsim.evaluate.tracking import TrackingRun, measure_poses
+from arsim.lighting.mapset import MapSet
 from arsim.lighting.methods import bake
 from arsim.render.baking import BakeSettings, LoopBaker
 from arsim.render.content import light_objects
 from arsim.render.loop import GL_STEPS, FrameLoop, Shading
 from arsim.render.renderer import Renderer, SceneObject
+from arsim.sensors.frames import recording_camera
 from arsim.sensors.recording import Recording
-from arsim.tracking.apriltag import TagTracker
+from arsim.tracking.apriltag import TagPose, TagTracker
 
 STEPS = ("track", "background", "objects", "tone_mapping", "overlay", "readback", "truth_frame")
 
@@ -46,25 +46,17 @@ class SessionSettings:
     flip_every: int = 1  # the truth frame and its FLIP on every k-th rendered frame (and on the saved ones)
 
 
+Scorer = Callable[[np.ndarray, np.ndarray, np.ndarray], float]  # (truth frame, frame, mask) -> score inside the mask
+
+
 @dataclass
 class SessionResult:
-    tracking: TrackingRun
     frames: np.ndarray  # (K,) indices of the AR path's frames rendered
-    flip: np.ndarray  # (K,) mean FLIP inside the mask; nan where no object was drawn or not measured (flip_every)
+    poses: list[TagPose]  # (K,) the tracker's, per frame rendered
+    flip: np.ndarray  # (K,) the scorer's inside the mask; nan where no object was drawn or not measured (flip_every)
     step_ms: dict[str, list[float]] = field(default_factory=dict)  # CPU ms per step per frame
     gl_ms: dict[str, list[float]] = field(default_factory=dict)  # GL ms per GL step per frame
     records: list = field(default_factory=list)  # the render loop's FrameRecord per frame (the profile's input)
-
-    def metrics(self) -> dict:
-        drawn = np.isfinite(self.flip)
-        return self.tracking.metrics() | {
-            "flip_mean": float(np.mean(self.flip[drawn])) if drawn.any() else float("nan"),
-            "flip_frames": int(drawn.sum()),
-            "frames_rendered": [int(k) for k in self.frames],
-            "flip_per_frame": [None if not np.isfinite(f) else float(f) for f in self.flip],
-            "step_ms": {name: float(np.median(v)) for name, v in self.step_ms.items() if v},
-            "step_gl_ms": {name: float(np.median(v)) for name, v in self.gl_ms.items() if v},
-        }
 
 
 def maps_needed(objects: Sequence[SceneObject], method: str) -> dict[str, list[float]]:
@@ -76,28 +68,20 @@ def maps_needed(objects: Sequence[SceneObject], method: str) -> dict[str, list[f
     return {name: sorted(exponents) for name, exponents in needed.items()}
 
 
-def session_maps(env: np.ndarray, needed: dict[str, list[float]]) -> dict[str, dict[float, np.ndarray]]:
-    """The maps of every method the objects need, computed from the angle map env."""
-    return {name: dict(zip(exponents, bake(env, exponents, name).maps)) for name, exponents in needed.items()}
+def session_maps(env: np.ndarray, needed: dict[str, list[float]], source: str = "") -> dict[str, MapSet]:
+    """The maps of every method the objects need, computed from the angle map env (source: what it is)."""
+    return {name: MapSet.of(name, exponents, bake(env, exponents, name).maps, source) for name, exponents in needed.items()}
 
 
-def check_maps(maps: dict[str, dict[float, np.ndarray]], needed: dict[str, list[float]]) -> None:
+def check_maps(maps: dict[str, MapSet], needed: dict[str, list[float]]) -> None:
     """ArsimError naming what is missing where given maps lack a method or an exponent the objects need."""
     for name, exponents in needed.items():
         missing = [s for s in exponents if s not in maps.get(name, {})]
         if missing:
-            held = "; ".join(f"{m}: {', '.join(f'{s:g}' for s in sorted(ms))}" for m, ms in maps.items()) or "none"
+            held = "; ".join(f"{m}: {', '.join(f'{s:g}' for s in ms.exponents)}" for m, ms in maps.items()) or "none"
             spec = ",".join(f"{s:g}" for s in exponents)
             raise ArsimError(f"no {name} maps for exponent {', '.join(f'{s:g}' for s in missing)} among the maps given "
                              f"({held}); bake them: arsim bake PROBE.exr -o DIR --method {name} --spec {spec}")
-
-
-def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
-    """Mean FLIP (LDR, sRGB inputs) of two 8-bit frames over the masked pixels, evaluated on the mask's
-    bounding box widened beyond FLIP's filters (the whole frame costs most of a second at 640 x 480)."""
-    from arsim.evaluate.diff import flip_map
-
-    return float(flip_map(reference, test, mask)[mask].mean())
 
 
 def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray) -> tuple:
@@ -107,22 +91,24 @@ def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray) -> tuple:
     return camera, TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
 
 
-def _renderer(camera, maps: dict, ctx, method: str, objects: list[SceneObject]) -> Renderer:
-    renderer = Renderer(camera, maps, ctx, method=method)
+def _renderer(camera, maps: dict[str, MapSet], ctx, method: str, objects: list[SceneObject]) -> Renderer:
+    renderer = Renderer(camera, maps.values(), ctx, method=method)
     for obj in objects:
         renderer.add(obj)
     return renderer
 
 
-def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_maps: dict, out_dir: Path,
-                objects: list[SceneObject], settings: SessionSettings = SessionSettings(),
+def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapSet], truth_maps: dict[str, MapSet],
+                out_dir: Path,
+                objects: list[SceneObject], score: Scorer, settings: SessionSettings = SessionSettings(),
                 truth_objects: list[SceneObject] | None = None,
                 progress: Callable[[float], None] = lambda fraction: None) -> SessionResult:
     """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
-    (per method, per exponent: from the captured probe, or baked before) and truth frames lit by
-    `truth_maps` (the same from the true environment); writes frames/*.png and session.mp4 into out_dir.
-    truth_objects: the objects as the truth frames show them, where their directional light maps were
-    baked from the true environment (light_objects); default: `objects`."""
+    (a set per method: from the captured probe, or baked before) and truth frames lit by
+    `truth_maps` (the same from the true environment), each frame scored against its truth frame by
+    `score`; writes frames/*.png and session.mp4 into out_dir. truth_objects: the objects as the truth
+    frames show them, where their directional light maps were baked from the true environment
+    (light_objects); default: `objects`."""
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code)
     captured = _renderer(camera, maps, ctx, settings.method, objects)
@@ -163,7 +149,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
                     truth_frame = truth_frame.copy()  # box), and those pixels left out: not the objects' light
                     truth_frame[overlay_box] = out[overlay_box]
                     mask[overlay_box] = False
-                flips[n] = masked_flip(truth_frame, out, mask) if mask.any() else np.nan
+                flips[n] = score(truth_frame, out, mask) if mask.any() else np.nan
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
             video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))
             if k in saved:
@@ -171,7 +157,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict, truth_ma
             if n % 10 == 0 or n == count - 1:
                 progress((n + 1) / count)
         video.release()
-    return SessionResult(measure_poses(rec, poses, indices), indices, flips, step_ms, gl_ms, records)
+    return SessionResult(indices, poses, flips, step_ms, gl_ms, records)
 
 
 def frame_time_s(rec: Recording, k: int) -> float:
@@ -193,12 +179,13 @@ def lap_frame(n: int, count: int) -> int:
 def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, objects: list[SceneObject],
                 bake_settings: BakeSettings, budget_ms: float, max_frames: int, out_dir: Path | None = None,
                 settings: SessionSettings = SessionSettings(method="mipmap", overlay=True), tail_frames: int = 30,
-                poses: dict | None = None, progress: Callable[[float], None] = lambda fraction: None) -> ProfileRun:
+                poses: dict | None = None, progress: Callable[[float], None] = lambda fraction: None) -> list:
     """The render loop over the AR path's frames, along it and back again and again, while step 3 bakes
     the objects' maps from `probe` with `bake_settings` (the objects lit by `settings.method` maps meanwhile), until the
     bake is complete and tail_frames more, or max_frames. The tracker runs once per recorded frame (its
     pose is kept in `poses` for the next lap, and the next run). With out_dir, frames at a quarter and a
-    half of the bake and after it go to out_dir/frames (the progress display)."""
+    half of the bake and after it go to out_dir/frames (the progress display). Returns the loop's
+    FrameRecord per frame (the profile's input)."""
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code)
     needed = maps_needed(objects, settings.method)
@@ -235,4 +222,4 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
             progress(baker.progress)
     progress(1.0)
     baker.release()
-    return ProfileRun(bake_settings.label, bake_settings.method, budget_ms, records)
+    return records

@@ -14,7 +14,7 @@ import dataclasses
 import json
 import platform
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -24,17 +24,12 @@ from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
 from arsim.core.gl import create_gl_context
-from arsim.core.resample import to_layout
+from arsim.core.progress import quiet_stage
 from arsim.evaluate.metrics import map_error
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
 STAGES = ("recording", "capture", "maps", "session", "report")
-
-
-@contextlib.contextmanager
-def quiet_stage(description: str) -> Iterator[Callable[..., None]]:
-    yield lambda completed=None, description=None: None
 
 
 def _files_under(out: Path, roles: dict[str, str]) -> list[dict]:
@@ -76,17 +71,18 @@ def versions(gl_renderer: str) -> dict:
 def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | None = None,
                  stage: Callable = quiet_stage) -> dict:
     """Run every stage into out; returns the manifest (also written to out/manifest.json)."""
-    from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
-    from arsim.capture.response import response_error
-    from arsim.evaluate.capture_report import filled, write_capture
+    from arsim.capture.pipeline import CaptureSettings, recording_scenario
+    from arsim.evaluate.diff import masked_flip
     from arsim.evaluate.profile import ProfileRun, write_profile
+    from arsim.evaluate.session import session_metrics
     from arsim.lighting.bake_output import write_bake
+    from arsim.lighting.mapset import MapSet
     from arsim.lighting.methods import MapParameters, bake
     from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, maps_needed, run_session
     from arsim.run.report import write_report
+    from arsim.run.stages import measured_capture, session_probe
     from arsim.scenario.environment import load_environment
-    from arsim.sensors.camera import ResponseCurve
     from arsim.sensors.recording import load_recording, record, recording_segments
 
     seconds: dict[str, float] = {}
@@ -118,18 +114,13 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     recorded = recording_scenario(sweep)  # the sensors as recorded, whatever the scenario given says
 
     # 2. The capture, measured against the truth.
-    settings = CaptureSettings.of(recorded)
-    with step("capture", "2/5 capturing the light probe") as update:
-        result = capture(sweep, settings, progress=lambda f, c: update(completed=f))
-    truth_probe = load_environment(dataclasses.replace(recorded.environment, probe_size=settings.size))
-    cam = recorded.device.camera
-    true_response = ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
-    capture_metrics = write_capture(result, truth_probe, response_error(result.response, true_response), out / "capture")
+    result, capture_metrics = measured_capture(sweep, CaptureSettings.of(recorded), out / "capture",
+                                               lambda description: step("capture", description),
+                                               "2/5 capturing the light probe")
 
     # 3. The maps of every method named, from the captured probe; each measured against the same method's
     # maps of the true environment (what the capture costs) and the true environment's accurate maps.
-    acc = result.accumulator
-    probe = to_layout(filled(acc.probe(), acc.covered()), "anglemap", r.map_size)
+    probe = session_probe(result, r.map_size)
     truth = load_environment(dataclasses.replace(recorded.environment, probe_size=r.map_size))
     needed = maps_needed(objects, r.method)
     exponents = sorted({s for ss in needed.values() for s in ss})
@@ -147,8 +138,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             (out / "maps" / name).mkdir(parents=True, exist_ok=True)
             write_bake(out / "maps" / name, exponents, name, params, baked, "capture/env.exr")
             true_maps = reference if name == "accurate" else bake(truth, exponents, name, params, gl=gl).maps
-            maps[name] = dict(zip(exponents, baked.maps))
-            truth_maps[name] = dict(zip(exponents, true_maps))
+            maps[name] = MapSet.of(name, exponents, baked.maps, "capture/env.exr")
+            truth_maps[name] = MapSet.of(name, exponents, true_maps, "truth")
             map_metrics[name] = {
                 "seconds": baked.seconds_total,
                 "per_exponent": {f"{s:g}": {
@@ -163,18 +154,18 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     session_settings = SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay, flip_every=r.flip_every)
     with step("session", "4/5 rendering the AR session") as update:
         session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe),
-                              session_settings, truth_objects=light_objects(objects, truth),
+                              masked_flip, session_settings, truth_objects=light_objects(objects, truth),
                               progress=lambda f: update(completed=f))
     (out / "profile").mkdir(exist_ok=True)
     write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")
 
     # 5. Metrics, report and manifest.
-    session_metrics = session.metrics()
+    tracking, session_figures = session_metrics(ar, session)
     metrics = {"capture": {k: v for k, v in capture_metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
-               "maps": map_metrics, "session": session_metrics}
+               "maps": map_metrics, "session": session_figures}
     write_text_atomic(out / "metrics.json", json_text(metrics))
     with step("report", "5/5 writing the report") as update:
-        write_report(out, scenario, source, metrics, session, maps)
+        write_report(out, scenario, source, metrics, tracking, session.frames, maps)
     manifest = {
         "scenario": {"source": source, "name": scenario.run.name, "resolved": "scenario.toml"},
         "seed": scenario.run.seed,

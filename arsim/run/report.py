@@ -13,6 +13,8 @@ import numpy as np
 
 from arsim.core.files import atomic_path, write_text_atomic
 from arsim.evaluate.compare_methods import maps_grid
+from arsim.evaluate.tracking import TrackingRun
+from arsim.lighting.mapset import MapSet
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
@@ -37,15 +39,13 @@ def _table(header: list[str], rows: list[list]) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def plot_tracking(session, path: Path) -> None:
+def plot_tracking(t: TrackingRun, frames: np.ndarray, path: Path) -> None:
     """Rotation and position error of the tracked tag per frame; where the tag was lost."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t = session.tracking
-    frames = session.frames
     fig, (a, b) = plt.subplots(2, 1, figsize=(9, 4.5), dpi=100, sharex=True)
     lost = ~t.found
     for ax, values, label in ((a, t.rot_err_deg, "rotation error (degrees)"), (b, t.trans_err_pct, "position error (% of distance)")):
@@ -63,13 +63,14 @@ def plot_tracking(session, path: Path) -> None:
     plt.close(fig)
 
 
-def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, session, maps: dict) -> Path:
+def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, tracking: TrackingRun, frames: np.ndarray,
+                 maps: dict[str, MapSet]) -> Path:
     report = out / "report"
     report.mkdir(exist_ok=True)
-    exponents = sorted(next(iter(maps.values())))
+    exponents = next(iter(maps.values())).exponents
     maps_grid({name: np.stack([m[s] for s in exponents]) for name, m in maps.items()}, exponents, report / "maps.png",
               "Irradiance (s = 1) and reflection maps baked from the captured probe")
-    plot_tracking(session, report / "tracking.png")
+    plot_tracking(tracking, frames, report / "tracking.png")
     c, s = metrics["capture"], metrics["session"]
     capture_rows = [[html.escape(k), html.escape(_num(v)) if not isinstance(v, list) else html.escape("; ".join(map(str, v)) or "none")]
                     for k, v in c.items()]

@@ -36,9 +36,12 @@ def setting(
     choices: tuple[Any, ...] | None = None,
     must_exist: bool = False,
     unit: str = "",
+    check: Any = None,
 ) -> Any:
-    """Declare a scenario key: its default, a one-line help, and what values are allowed."""
-    meta = {"help": help, "min": min, "max": max, "choices": choices, "must_exist": must_exist, "unit": unit}
+    """Declare a scenario key: its default, a one-line help, and what values are allowed; check(value) returns
+    what is wrong with a value and how to fix it (None: nothing), for rules beyond a range or choices."""
+    meta = {"help": help, "min": min, "max": max, "choices": choices, "must_exist": must_exist, "unit": unit,
+            "check": check}
     if isinstance(default, list):
         raise TypeError("use a tuple for sequence defaults, so the dataclass stays immutable")
     return field(default=default, metadata=meta)
@@ -153,6 +156,9 @@ def _check_value(name: str, value: Any, meta: dict, where: str, written: Any) ->
             hint = difflib.get_close_matches(str(v), [str(c) for c in meta["choices"]], n=1)
             mean = f"; did you mean {_describe(hint[0])}?" if hint else ""
             raise ScenarioError(f"{where} {name} = {_describe(value)} is not allowed: use one of {options}{mean}")
+    problem = meta["check"](value) if meta.get("check") is not None else None
+    if problem:
+        raise ScenarioError(f"{where} {name} = {_describe(written)} {problem}")
 
 
 def _unknown_key(key: str, known: list[str], where: str, top_level: bool) -> ScenarioError:

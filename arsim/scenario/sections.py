@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from arsim.core.conventions import map_size_problem
+from arsim.lighting.methods import LOOP_METHODS, METHODS
 from arsim.scenario.schema import setting, subsection
 
 
@@ -170,7 +172,7 @@ class ArSection:
                                                        help="diffuse reflectance of the table top (linear RGB)")
 
 
-MAP_METHODS = ("accurate", "bounds", "fast", "mipmap", "sh", "mc")  # arsim.lighting.methods.METHODS, by name
+MAP_METHODS = tuple(METHODS)
 
 
 @dataclass(frozen=True)
@@ -220,7 +222,8 @@ class RenderSection:
     """[render]: the AR session's renderer: the map method, the tone mapper, the virtual objects."""
 
     method: str = setting("fast", choices=MAP_METHODS, help="map method for the captured probe's maps")
-    map_size: int = setting(128, min=8, max=4096, help="N of the N x N irradiance and reflection maps (a power of two)")
+    map_size: int = setting(128, min=8, max=4096, check=map_size_problem,
+                            help="N of the N x N irradiance and reflection maps (a power of two)")
     key: float = setting(0.18, min=0.001, max=100.0, help="Reinhard's key a")
     white: float = setting(2.0, min=0.001, max=1e6, help="Reinhard's L_white")
     log_average: bool = setting(False, help="tone-map with Reinhard's log-average luminance instead of the mean (thesis)")
@@ -244,7 +247,7 @@ class ProfileSection:
 
     budget_ms: float = setting(33.3, min=0.001, max=10000.0, unit="ms", help="frame budget (30 frames/s: 33.3)")
     tile: str = setting("auto", help="tile side baked per frame (a divisor of [render] map_size, e.g. \"64\"), or \"auto\"")
-    bake: str = setting("accurate", choices=("accurate", "bounds", "sh"), help="the method of the maps baked in the loop")
+    bake: str = setting("accurate", choices=LOOP_METHODS, help="the method of the maps baked in the loop")
     max_frames: int = setting(20000, min=1, max=10_000_000, unit="frames",
                               help="stop after this many frames even if the bake is not complete")
 

@@ -201,30 +201,46 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     """Write one segment's files; returns the fused yaw error at its end (degrees)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "frames").mkdir(exist_ok=True)
-    seed = scenario.run.seed
     trajectory = segment.trajectory
     camera = camera_intrinsics(scenario)
     cam = scenario.device.camera
     mount = camera_mount(scenario.device.camera_misalignment_deg)
     # Independent streams per purpose, so adding frames does not change the IMU and vice versa (the
     # camera's noise is hashed from seed, stream and frame index: camera.noise_key).
-    rng_imu = np.random.default_rng([seed, segment.imu_seed])
+    rng_imu = np.random.default_rng([scenario.run.seed, segment.imu_seed])
     device = scenario.device
     streams = simulate_imu(trajectory, rng_imu, sensor_model(device.gyroscope), sensor_model(device.accelerometer),
                            sensor_model(device.magnetometer))
     t_fused, fused = mahony(streams, trajectory.orientation([0.0])[0], scenario.capture.fusion)
     truth = trajectory.orientation(t_fused / 1e9)
 
-    sensor = SensorSettings.of(cam)
     response = ResponseCurve(cam.response, cam.gamma, cam.contrast)
-    renderer = CameraRenderer(probe, camera, sensor, response, table=segment.table)
-    ae = AutoExposure(sensor, response)
+    renderer = CameraRenderer(probe, camera, SensorSettings.of(cam), response, table=segment.table)
     # The burst looks where the sweep passes the horizon (mid-sweep): sky and ground, the widest range; other
     # views along the sweep where that one is too dark.
     candidates = np.concatenate([[trajectory.duration / 2], np.linspace(0.0, trajectory.duration, BURST_CANDIDATES)])
     burst_views = trajectory.camera_orientation(candidates, mount)
     burst_rows = (_write_burst(out_dir, renderer, burst_views, scenario, response)
                   if segment.burst else [])
+    rows = _write_frames(scenario, segment, renderer, response, mount, out_dir, progress)
+    renderer.release()
+
+    write_text_atomic(out_dir / "frames.csv", _csv(["t_ns", "exposure_ns", "iso", "file"], rows))
+    write_text_atomic(out_dir / "burst.csv", _csv(["exposure_ns", "iso", "file"], burst_rows))
+    _write_streams(out_dir, streams, t_fused, fused, trajectory.position(t_fused / 1e9), truth)
+    meta = _segment_meta(scenario, segment, camera, mount, renderer.table_light)
+    write_text_atomic(out_dir / "meta.json", json.dumps(meta | extra_meta, indent=2) + "\n")
+    return float(yaw_error_deg(fused[-1:], truth[-1:])[0])
+
+
+def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mount, out_dir: Path,
+                  progress: Callable[[float], None]) -> list[tuple]:
+    """The segment's frames under auto-exposure (bracketed ones at the metered exposure times 2^ev),
+    rendered and written as PNG into out_dir/frames; returns frames.csv's rows."""
+    cam = scenario.device.camera
+    sensor = SensorSettings.of(cam)
+    ae = AutoExposure(sensor, response)
+    trajectory = segment.trajectory
     n_frames = frame_count(trajectory, cam.fps)
     rows = []
     times = np.arange(n_frames) / cam.fps
@@ -238,7 +254,7 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
             ev = segment.bracket_ev[k % len(segment.bracket_ev)]
             if ev:
                 used = ae.settings(used[0] * used[1] / sensor.base_iso * 2.0**ev)
-            frame = renderer.capture(views[k], *used, noise_key(seed, segment.name, k), positions[k])
+            frame = renderer.capture(views[k], *used, noise_key(scenario.run.seed, segment.name, k), positions[k])
             if not ev:
                 ae.update(frame, used)
             name = f"{k:06d}.png"
@@ -249,10 +265,12 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
             progress((k + 1) / n_frames)
         for future in pending:
             future.result()
-    renderer.release()
+    return rows
 
-    write_text_atomic(out_dir / "frames.csv", _csv(["t_ns", "exposure_ns", "iso", "file"], rows))
-    write_text_atomic(out_dir / "burst.csv", _csv(["exposure_ns", "iso", "file"], burst_rows))
+
+def _write_streams(out_dir: Path, streams: dict, t_fused: np.ndarray, fused, device_positions: np.ndarray, truth) -> None:
+    """imu.csv, orientation.csv (the fusion's) and groundtruth.csv (positions and orientations at the fusion's
+    times)."""
     # Many thousand rows: formatted from Python floats in one pass (9 decimals, as nanoseconds are
     # the time unit and 1e-9 is below every sensor's resolution).
     imu = sorted(((t, name, *v) for name in SENSORS
@@ -260,16 +278,20 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     write_text_atomic(out_dir / "imu.csv", _csv_formatted(["t_ns", "sensor", "x", "y", "z"], "%d,%s" + ",%.9f" * 3, imu))
     write_text_atomic(out_dir / "orientation.csv", _csv_formatted(
         ["t_ns", "qx", "qy", "qz", "qw"], "%d" + ",%.9f" * 4, zip(t_fused.tolist(), *fused.as_quat().T.tolist())))
-    device_positions = trajectory.position(t_fused / 1e9)
     write_text_atomic(out_dir / "groundtruth.csv", _csv_formatted(
         ["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"], "%d" + ",%.9f" * 7,
         zip(t_fused.tolist(), *device_positions.T.tolist(), *truth.as_quat().T.tolist())))
+
+
+def _segment_meta(scenario: Scenario, segment: _Segment, camera, mount, table_light) -> dict:
+    """meta.json's keys: the format, the camera, its mount, the fusion, the scenario, and the table."""
+    cam = scenario.device.camera
     meta = {
         "format": FORMAT,
         "arsim_version": __version__,
         "segment": segment.name,
-        "seed": seed,
-        "duration_s": trajectory.duration,
+        "seed": scenario.run.seed,
+        "duration_s": segment.trajectory.duration,
         "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy,
                    "cx": camera.cx, "cy": camera.cy, "k1": camera.k1, "k2": camera.k2, "fps": cam.fps},
         "camera_to_device": mount.as_matrix().tolist(),
@@ -280,9 +302,8 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
         t = segment.table
         meta["table"] = {"tag_family": t.tag_family, "tag_id": t.tag_id, "tag_size_m": t.tag_size_m,
                          "tag_corners_world": t.tag_corners_world().tolist(), "size_m": list(t.size_m),
-                         "albedo": list(t.albedo), "light": [float(v) for v in renderer.table_light]}
-    write_text_atomic(out_dir / "meta.json", json.dumps(meta | extra_meta, indent=2) + "\n")
-    return float(yaw_error_deg(fused[-1:], truth[-1:])[0])
+                         "albedo": list(t.albedo), "light": [float(v) for v in table_light]}
+    return meta
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -1,0 +1,24 @@
+"""The AR session measured: its tracked poses against the truth, its frames' scores against the truth
+frames, and the render loop's step timings, as the figures `metrics.json` reports."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from arsim.evaluate.tracking import TrackingRun, measure_poses
+from arsim.render.session import SessionResult
+from arsim.sensors.recording import Recording
+
+
+def session_metrics(rec: Recording, session: SessionResult) -> tuple[TrackingRun, dict]:
+    """The session's tracking against the truth (rec: the AR recording it ran over), and its figures."""
+    tracking = measure_poses(rec, session.poses, session.frames)
+    drawn = np.isfinite(session.flip)
+    return tracking, tracking.metrics() | {
+        "flip_mean": float(np.mean(session.flip[drawn])) if drawn.any() else float("nan"),
+        "flip_frames": int(drawn.sum()),
+        "frames_rendered": [int(k) for k in session.frames],
+        "flip_per_frame": [None if not np.isfinite(f) else float(f) for f in session.flip],
+        "step_ms": {name: float(np.median(v)) for name, v in session.step_ms.items() if v},
+        "step_gl_ms": {name: float(np.median(v)) for name, v in session.gl_ms.items() if v},
+    }

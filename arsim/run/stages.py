@@ -1,0 +1,122 @@
+"""The stages composed into the steps the commands run: a capture measured against the truth, an AR
+session's inputs, the AR session rendered and measured, the render loop profiled while it bakes. `arsim run`
+(pipeline.py) chains them all; `arsim capture`, `render` and `profile` call one each; the command line only
+parses, calls and prints.
+
+`stage(description)` is a context manager yielding update(completed=None, description=None): a progress
+bar on a terminal, nothing elsewhere (quiet_stage).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from arsim.capture.accumulate import filled
+from arsim.capture.pipeline import CaptureResult, CaptureSettings, burst_response, capture, recording_scenario
+from arsim.capture.response import response_error
+from arsim.core.files import json_text, write_text_atomic
+from arsim.core.progress import quiet_stage
+from arsim.core.resample import to_layout
+from arsim.evaluate.capture_report import write_capture
+from arsim.evaluate.diff import masked_flip
+from arsim.evaluate.profile import ProfileRun, write_profile
+from arsim.evaluate.session import session_metrics
+from arsim.render.baking import BakeSettings
+from arsim.render.content import light_objects, scene_objects
+from arsim.render.session import SessionSettings, check_maps, maps_needed, run_profile, run_session, session_maps
+from arsim.scenario import Scenario
+from arsim.scenario.environment import load_environment
+from arsim.sensors.camera import ResponseCurve, SensorSettings
+from arsim.sensors.recording import Recording, load_recording, record
+
+Stage = Callable[[str], contextlib.AbstractContextManager]
+
+
+def true_response(scenario: Scenario) -> np.ndarray:
+    """The camera's true inverse response (256,), what the capture's calibration is measured against."""
+    cam = scenario.device.camera
+    return ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
+
+
+def measured_capture(rec: Recording, settings: CaptureSettings, out: Path, stage: Stage = quiet_stage,
+                     description: str = "capturing") -> tuple[CaptureResult, dict]:
+    """The capture of a recording's sweep, measured against the truth, written into out (env.exr,
+    metrics.json, plots); returns the result and its metrics."""
+    scenario = recording_scenario(rec)  # the sensors as recorded
+    with stage(description) as update:
+        result = capture(rec, settings, progress=lambda f, c: update(
+            completed=f, description=f"{description}: {100 * c:.1f} % covered"))
+    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=settings.size))
+    return result, write_capture(result, truth, response_error(result.response, true_response(scenario)), out)
+
+
+def session_probe(result: CaptureResult, map_size: int) -> np.ndarray:
+    """The captured probe as the maps take it: holes filled from their surroundings, map_size²."""
+    acc = result.accumulator
+    return to_layout(filled(acc.probe(), acc.covered()), "anglemap", map_size)
+
+
+def session_inputs(scenario: Scenario, out: Path, probe: np.ndarray | None, map_size: int, capture_probe: bool = True,
+                   stage: Stage = quiet_stage):
+    """What an AR session needs: the scenario recorded into out/recording, its AR part, the light probe
+    (`probe` where given, else captured from the sweep; None when not wanted) as a map_size angle map, and
+    the camera's response (from the capture, or from the sweep's burst)."""
+    with stage("recording the sweep and the AR path") as update:
+        record(scenario, out / "recording", progress=lambda f: update(completed=f))
+    sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
+    if probe is None and capture_probe:
+        with stage("capturing the light probe") as update:
+            result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
+        return ar, session_probe(result, map_size), result.response
+    return ar, probe, burst_response(sweep, SensorSettings.of(scenario.device.camera))
+
+
+def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map_size: int, probe: np.ndarray | None = None,
+                   maps: dict | None = None, source: str = "captured", stage: Stage = quiet_stage,
+                   objects: list | None = None) -> dict:
+    """The AR session of a scenario into out: recorded, the probe captured (or `probe`), the objects
+    (scene_objects of the scenario, unless given) lit by maps from it (or by `maps` baked before), each
+    frame scored against its truth frame; metrics.json written; returns the metrics."""
+    objects = scene_objects(scenario.render) if objects is None else objects
+    needed = maps_needed(objects, settings.method)
+    if maps is not None:
+        check_maps(maps, needed)
+    ar, probe, response = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None, stage=stage)
+    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
+    with stage(f"computing the maps ({', '.join(needed)})"):
+        maps = maps if maps is not None else session_maps(probe, needed, source)
+        truth_maps = session_maps(truth, needed, "truth")
+    with stage(f"rendering the AR session ({', '.join(needed)} maps)") as update:
+        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), masked_flip,
+                              settings, truth_objects=light_objects(objects, truth), progress=lambda f: update(completed=f))
+    metrics = session_metrics(ar, session)[1] | {"method": settings.method, "methods": needed, "map_size": map_size,
+                                                 "log_average": settings.log_average, "probe": source}
+    write_text_atomic(out / "metrics.json", json_text(metrics))
+    return metrics
+
+
+def profile_session(scenario: Scenario, out: Path, bakes: Sequence[BakeSettings], budget_ms: float, max_frames: int,
+                    map_size: int, probe: np.ndarray | None = None, stage: Stage = quiet_stage,
+                    objects: list | None = None) -> list[ProfileRun]:
+    """The render loop over a scenario's AR path while step 3 bakes maps tile by tile, once per bake setting
+    (tile policy), into out (profile.md, trace.json, timeline.png; frames per run); returns the runs."""
+    for b in bakes:
+        b.check(map_size)  # a tile that does not divide the maps fails here, before any work
+    r = scenario.render
+    objects = scene_objects(r) if objects is None else objects
+    ar, probe, response = session_inputs(scenario, out, probe, map_size, stage=stage)
+    settings = SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True)
+    runs, poses = [], {}
+    for b in bakes:
+        with stage(f"baking {b.method} maps in the loop, tile {b.label}") as update:
+            records = run_profile(ar, response.linear[:, 1], probe, objects, b, budget_ms, max_frames,
+                                  out / (f"tile_{b.label}" if len(bakes) > 1 else "."), settings, poses=poses,
+                                  progress=lambda f: update(completed=f))
+        runs.append(ProfileRun(b.label, b.method, budget_ms, records))
+    write_profile(runs, out)
+    return runs
