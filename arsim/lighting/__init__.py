@@ -10,22 +10,10 @@ methods.py   the methods by name (METHODS), their parameters, and a timed bake
 mapset.py    MapSet: one method's maps of one light
 """
 
-_PUBLIC = {
-    "METHODS": "arsim.lighting.methods",
-    "MapParameters": "arsim.lighting.methods",
-    "bake": "arsim.lighting.methods",
-    "BakeResult": "arsim.lighting.methods",
-    "MapSet": "arsim.lighting.mapset",
-    "read_bake": "arsim.lighting.bake_output",
-    "write_bake": "arsim.lighting.bake_output",
-}
-__all__ = sorted(_PUBLIC)
+from arsim.core.public import lazy_names
 
-
-def __getattr__(name: str):
-    """The public names, imported when first used (importing the package stays cheap)."""
-    if name in _PUBLIC:
-        import importlib
-
-        return getattr(importlib.import_module(_PUBLIC[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__all__, __getattr__ = lazy_names(__name__, {
+    "methods": ("METHODS", "MapParameters", "bake", "BakeResult"),
+    "mapset": ("MapSet",),
+    "bake_output": ("read_bake", "write_bake"),
+})
