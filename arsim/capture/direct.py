@@ -17,6 +17,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from arsim.capture.align import scaled_camera
 from arsim.core.conventions import CameraIntrinsics
 
 DIRECT_SCALE = 0.5  # of the keyframe's features size (a quarter of the frame: 160 x 120 at 640 x 480)
@@ -46,17 +47,14 @@ class DirectImages:
                  falloff: np.ndarray):
         """camera: the features' (the images given are at its size); frame_camera, falloff (H, W): the
         full frame's; linear (256, 3): the response."""
-        w, h = round(camera.width * DIRECT_SCALE), round(camera.height * DIRECT_SCALE)
-        self.camera = replace(camera, width=w, height=h, fx=camera.fx * DIRECT_SCALE, fy=camera.fy * DIRECT_SCALE,
-                              cx=(camera.cx + 0.5) * DIRECT_SCALE - 0.5, cy=(camera.cy + 0.5) * DIRECT_SCALE - 0.5,
-                              k1=0.0, k2=0.0)
+        self.camera = replace(scaled_camera(camera, DIRECT_SCALE), k1=0.0, k2=0.0)
+        w, h = self.camera.width, self.camera.height
         # where each pinhole pixel lies in the features' image (distortion applied): one remap undistorts and
         # scales down (the source blurred first against aliasing)
         grid = np.stack(np.meshgrid(np.arange(w), np.arange(h)), axis=-1).astype(np.float64)
         self.rays = self.camera.unproject(grid)  # (H, W, 3) unit bearings of the pinhole pixels
         source = camera.project(self.rays)
         self.map_x, self.map_y = source[..., 0].astype(np.float32), source[..., 1].astype(np.float32)
-        self.source_size = (camera.width, camera.height)
         full = frame_camera.project(self.rays).astype(np.float32)
         self.log_falloff = np.log(cv2.remap(falloff.astype(np.float32), full[..., 0], full[..., 1], cv2.INTER_LINEAR,
                                             borderMode=cv2.BORDER_REPLICATE))

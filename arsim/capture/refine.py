@@ -439,15 +439,18 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
     rng = np.random.default_rng(seed)
     matched: dict[tuple[int, int], tuple[Rotation, np.ndarray, int] | None] = {}
     aligned: dict[tuple[int, int], tuple[Rotation, np.ndarray] | None] = {}
+    direct_used: set[tuple[int, int]] = set()  # the pairs the last call took from the direct alignment
 
     def pairs_within(pairs, expected: Rotation, gate) -> list[Constraint]:
         """The pairs matched within gate(dt, angle) (rad) of the expected orientations' (per keyframe) relative
         rotation, and agreeing with it within the same; then, for the keyframes no feature pair reaches, their
         pairs aligned directly (a bare ceiling: the 20 s drifting sweep's last 8 s)."""
-        out, radii = [], {}
+        out, gated = [], {}  # per pair: the expected relative rotation and the gate's radius
+        direct_used.clear()
         for i, j in sorted(pairs):
             q = expected[i].inv() * expected[j]
-            radius = radii[(i, j)] = gate(key_t[j] - key_t[i], q.magnitude())
+            radius = gate(key_t[j] - key_t[i], q.magnitude())
+            gated[(i, j)] = (q, radius)
             if (i, j) not in matched:
                 matched[(i, j)] = match_pair(keyframes[i], keyframes[j], rng, q, radius)
             found = matched[(i, j)]
@@ -459,14 +462,15 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         for i, j in sorted(pairs):
             if i in reached and j in reached:
                 continue
-            q = expected[i].inv() * expected[j]
+            q, radius = gated[(i, j)]
             if (i, j) not in aligned:
                 match = align_direct(keyframes[i].image, keyframes[j].image, direct, q)
                 aligned[(i, j)] = None if match is None else (
                     match.rotation, match.covariance + isotropic(np.radians(PAIR_FLOOR_DEG)))
             found = aligned[(i, j)]
-            if found is not None and (found[0].inv() * q).magnitude() < radii[(i, j)]:
+            if found is not None and (found[0].inv() * q).magnitude() < radius:
                 out.append((i, j, found[0], found[1]))
+                direct_used.add((i, j))
         return out
 
     dts = np.diff(key_t)
@@ -503,7 +507,6 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
                                                     theta_sigma, near=k_round > 0, theta0=theta)
         before = before or cost_before
     used = len(constraints) - len(chain)  # (keyframe 0 was held: estimate[0] is the IMU's in every case)
-    direct_pairs = sum(1 for c in constraints[len(chain):] if (c[0], c[1]) in aligned
-                       and aligned[(c[0], c[1])] is not None and aligned[(c[0], c[1])][0] is c[2])
+    direct_pairs = sum(1 for c in constraints[len(chain):] if (c[0], c[1]) in direct_used)
     return Refinement(interpolate(times, keys, estimate, imu), keys, used, len(pairs), before, after, theta,
                       direct_pairs, time.perf_counter() - began)
