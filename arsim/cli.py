@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from arsim import __version__
-from arsim.core.assets import assets_dir, bundled_scenarios
+from arsim.core.assets import bundled_scenarios
 from arsim.core.conventions import is_map_size
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text
@@ -22,11 +22,10 @@ from arsim.core.progress import progress_bar
 from arsim.core.resample import LAYOUTS, detect_layout, to_layout
 from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_comparison
 from arsim.evaluate.diff import DEFAULT_MAX_FLIP
-from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
 from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake, method
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
-from arsim.sensors.recording import load_recording, record, recording_segments
+from arsim.sensors.recording import load_recording, recording_segments
 
 MAX_SIZE = 16384
 
@@ -154,20 +153,17 @@ def _recording_info(args: argparse.Namespace) -> int:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
+    from arsim.run.stages import recorded
+
     scenario = load_scenario(args.scenario)
     recording_segments(scenario)  # settings that do not fit together stop here, before any output
     out = _output_dir(args.output)
-    with progress_bar("recording the capture sweep and the AR path", 1.0) as update:
-        summary = record(scenario, out, progress=lambda f: update(completed=f))
-    plots = plot_recording(load_recording(out), out / "plots")
-    ar = ""
-    if summary.ar_frames:
-        ar_plot = plot_ar_path(load_recording(out / "ar"), out / "plots" / "ar_path.png")
-        ar = (f"; AR path: {summary.ar_frames} frames in {out / 'ar'}, the tag in view in "
-              f"{100 * ar_plot['tag_in_view']:.1f} % of them")
-    print(f"wrote {summary.frames} frames and the IMU streams of a {summary.duration_s:.0f} s sweep to {out}; "
-          f"{100 * plots['coverage']:.2f} % of the sphere seen; fused yaw error at the end "
-          f"{summary.final_yaw_error_deg:+.2f} degrees{ar}; plots in {out / 'plots'}")
+    r = recorded(scenario, out, _bar)
+    ar = (f"; AR path: {r.summary.ar_frames} frames in {out / 'ar'}, the tag in view in {100 * r.tag_in_view:.1f} % of them"
+          if r.tag_in_view is not None else "")
+    print(f"wrote {r.summary.frames} frames and the IMU streams of a {r.summary.duration_s:.0f} s sweep to {out}; "
+          f"{100 * r.coverage:.2f} % of the sphere seen; fused yaw error at the end "
+          f"{r.summary.final_yaw_error_deg:+.2f} degrees{ar}; plots in {out / 'plots'}")
     return 0
 
 
@@ -176,25 +172,20 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 
 def cmd_capture(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from arsim.capture.pipeline import CaptureSettings, recording_scenario
-    from arsim.run.stages import measured_capture
+    from arsim.run.stages import captured_sweep, measured_capture
 
     source = args.source
     if source is not None and source.is_dir():
         rec = load_recording(source)
         out = _output_dir(args.output)
+        settings = CaptureSettings.of(recording_scenario(rec), args.size, args.align_every)
+        _, metrics = measured_capture(rec, settings, out, _bar)
     else:
         scenario = load_scenario(source)
-        scenario = dataclasses.replace(scenario, ar=dataclasses.replace(scenario.ar, enabled=False))  # the sweep only
-        recording_segments(scenario)
+        recording_segments(scenario)  # settings that do not fit together stop here, before any output
         out = _output_dir(args.output)
-        with progress_bar("recording the capture sweep", 1.0) as update:
-            record(scenario, out / "recording", progress=lambda f: update(completed=f))
-        rec = load_recording(out / "recording")
-    settings = CaptureSettings.of(recording_scenario(rec), args.size, args.align_every)
-    _, metrics = measured_capture(rec, settings, out, _bar)
+        _, metrics = captured_sweep(scenario, out, args.size, args.align_every, _bar)
     for warning in metrics["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"captured {metrics['frames']} frames at {metrics['frames_per_second']:.1f} frames/s into {out / 'env.exr'}: "
@@ -437,32 +428,19 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
 
 
 def cmd_bases_compare(args: argparse.Namespace) -> int:
-    from arsim.evaluate.compare_bases import (
-        compare_bases,
-        parse_entries,
-        plane_lighting,
-        visual_comparison,
-        visual_figures,
-        write_bases_comparison,
-    )
+    from arsim.evaluate.compare_bases import bases_study, parse_entries, visual_environment
 
     selected = parse_entries(args.bases) if args.bases else None  # bad names fail here, before any work
     if not 0.0 <= args.sun_elevation <= 90.0:
         raise ArsimError(f"--sun-elevation {args.sun_elevation:g} is not an elevation: give 0 to 90 degrees")
-    env_path = args.env or assets_dir() / "envmaps" / "interior.exr"
-    env, _ = replace_nonfinite(read_hdr(env_path), "refuse", str(env_path))
-    env = to_layout(env, "equirect", 32)  # (irradiance is smooth: 32 x 64 radiance samples hold it)
+    environment = visual_environment(args.env)  # a file that cannot be read fails here, before any output
     out = _output_dir(args.output)
     with progress_bar("comparing bases", args.signals) as update:
-        comparison = compare_bases(args.signals, args.seed, selected, progress=lambda k: update(completed=k))
-    paths = write_bases_comparison(comparison, out)
-    visual = visual_comparison(plane_lighting(env, args.sun_elevation, 30.0, args.sun_share), selected=selected)
-    paths += [out / "visual.png", out / "visual_errors.png"]
-    visual_figures(visual, paths[-2], paths[-1], f"{Path(env_path).name}, sun at {args.sun_elevation:g} degrees elevation")
-    visual_errors = visual.errors()
-    for key, stats in comparison.summary().items():
-        print(f"{key:<14} mean error {100 * stats['mean']:8.3f} %   visual {100 * visual_errors[key]:7.3f} %")
-    print("wrote " + ", ".join(str(p) for p in paths))
+        study = bases_study(out, args.signals, args.seed, selected, environment, args.sun_elevation, args.sun_share,
+                            progress=lambda k: update(completed=k))
+    for key, stats in study.errors.items():
+        print(f"{key:<14} mean error {100 * stats['mean']:8.3f} %   visual {100 * study.visual_errors[key]:7.3f} %")
+    print("wrote " + ", ".join(str(p) for p in study.paths))
     return 0
 
 
@@ -547,16 +525,7 @@ SCENARIO_HELP = ("a scenario .toml, or a bundled scenario's name (" + ", ".join(
                  + "); default: the embedded default scenario")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="arsim",
-        description="arsim: a simulator of a mobile AR app that captures real-world light and renders virtual objects with it.",
-        epilog="example:\n  arsim info assets/envmaps/city.exr\n\nrun 'arsim COMMAND --help' for the options of a command.",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("--version", action="version", version=f"arsim {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-
+def _info_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "info", "print size, layout, radiance range and bad-texel counts of an HDR image, "
                  "or check a recording or a run directory (every file its manifest lists) and summarise it",
                  "arsim info assets/envmaps/sunrise.exr   (or: arsim info rec, arsim info run)")
@@ -565,6 +534,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(run=cmd_info)
 
+
+def _convert_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "convert", "convert an HDR image between layouts, sizes and formats (.exr, .hdr, .png preview)",
                  "arsim convert assets/envmaps/city.exr city_anglemap.exr --layout anglemap --size 512")
     p.add_argument("input", type=Path, metavar="IN", help="OpenEXR (.exr) or Radiance (.hdr) image, equirect 2:1 or angle map 1:1")
@@ -576,28 +547,34 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what to do with NaN/Inf texels: refuse the image (default) or replace them with 0")
     p.set_defaults(run=cmd_convert)
 
-    def map_options(p: argparse.ArgumentParser) -> None:
-        p.add_argument("env", type=Path, metavar="ENV", help="HDR environment, equirect 2:1 or angle map 1:1 (.exr or .hdr)")
-        p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
-        p.add_argument("--size", type=_map_size, metavar="N",
-                       help="N of the N x N angle maps, a power of two from 8 (default: an angle map's own size, else 512)")
-        p.add_argument("--spec", type=_exponents, default=list(DEFAULT_EXPONENTS), metavar="S,S,...",
-                       help="Phong exponents; 1 is the irradiance map (default: " + ",".join(map(str, DEFAULT_EXPONENTS)) + ")")
-        p.add_argument("--sh-order", type=_positive("--sh-order"), default=MapParameters.sh_order, metavar="L",
-                       help=f"sh: bands 0..L-1, L² coefficients (default {MapParameters.sh_order})")
-        p.add_argument("--sh-faithful", action="store_true",
-                       help="sh: evaluate Y_lm with factorials in double precision as the thesis's Alg. 2.5/2.6")
-        p.add_argument("--samples", type=_positive("--samples"), default=MapParameters.samples, metavar="K",
-                       help=f"mc: importance samples per texel (default {MapParameters.samples})")
-        p.add_argument("--seed", type=int, default=0, help="mc: random seed (default 0)")
 
+def _map_options(p: argparse.ArgumentParser) -> None:
+    """What bake and compare-methods share: the environment, the output folder, the maps and their parameters."""
+    p.add_argument("env", type=Path, metavar="ENV", help="HDR environment, equirect 2:1 or angle map 1:1 (.exr or .hdr)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("--size", type=_map_size, metavar="N",
+                   help="N of the N x N angle maps, a power of two from 8 (default: an angle map's own size, else 512)")
+    p.add_argument("--spec", type=_exponents, default=list(DEFAULT_EXPONENTS), metavar="S,S,...",
+                   help="Phong exponents; 1 is the irradiance map (default: " + ",".join(map(str, DEFAULT_EXPONENTS)) + ")")
+    p.add_argument("--sh-order", type=_positive("--sh-order"), default=MapParameters.sh_order, metavar="L",
+                   help=f"sh: bands 0..L-1, L² coefficients (default {MapParameters.sh_order})")
+    p.add_argument("--sh-faithful", action="store_true",
+                   help="sh: evaluate Y_lm with factorials in double precision as the thesis's Alg. 2.5/2.6")
+    p.add_argument("--samples", type=_positive("--samples"), default=MapParameters.samples, metavar="K",
+                   help=f"mc: importance samples per texel (default {MapParameters.samples})")
+    p.add_argument("--seed", type=int, default=0, help="mc: random seed (default 0)")
+
+
+def _bake_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "bake", "compute irradiance and reflection maps of an HDR environment with one method",
                  "arsim bake assets/envmaps/courtyard.exr -o maps --method fast --size 512 --spec 1,10,80")
-    map_options(p)
+    _map_options(p)
     p.add_argument("--method", choices=list(METHODS), default="fast",
                    help="; ".join(f"{m.name}: {m.summary}" for m in METHODS.values()) + " (default fast)")
     p.set_defaults(run=cmd_bake)
 
+
+def _bases_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "bases", "irradiance normal mapping's bases (SH, Half-Life 2, H-basis, modified H-basis, HSH, Makhotkin, "
                  "Zernike): `compare` measures how well each holds directional irradiance",
                  "arsim bases compare -o bases --signals 200")
@@ -619,9 +596,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the sun's irradiance at normal incidence, in units of the sky's on the plane (default 3)")
     q.set_defaults(run=cmd_bases_compare)
 
+
+def _compare_methods_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "compare-methods", "measure every map method against accurate: tables, a figure grid, SH error by order",
                  "arsim compare-methods assets/envmaps/courtyard.exr -o compare --size 128")
-    map_options(p)
+    _map_options(p)
     p.add_argument("--methods", type=lambda t: [m.strip() for m in t.split(",")], default=[m for m in METHODS if m != "accurate"],
                    metavar="M,M,...", help="methods to compare (default: all but accurate, which is the reference)")
     p.add_argument("--reference-texels", type=_positive("--reference-texels"), metavar="K",
@@ -631,6 +610,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="orders of the SH error-against-order study (default " + ",".join(map(str, DEFAULT_SH_ORDERS)) + "; empty to skip)")
     p.set_defaults(run=cmd_compare_methods)
 
+
+def _record_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "record", "synthesise the capture sweep of a scenario (frames, IMU streams, fused orientation, truth) and, "
                  "unless [ar] enabled = false, the AR path around the table and tag into DIR/ar",
                  "arsim record scenarios/indoor.toml -o rec")
@@ -638,6 +619,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="recording folder (created if missing)")
     p.set_defaults(run=cmd_record)
 
+
+def _capture_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "capture", "stitch a recording's frames into an HDR angle-map light probe, correcting the IMU's drift "
                  "by feature alignment, and measure it against the truth (records the scenario's sweep first if given one)",
                  "arsim capture rec -o capture   (or: arsim capture scenarios/indoor.toml -o capture)")
@@ -649,19 +632,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="align every K-th metered frame against the probe (default: [capture] align_every, 1)")
     p.set_defaults(run=cmd_capture)
 
-    def session_options(p: argparse.ArgumentParser, env_help: str) -> None:
-        """What render and profile share: the scenario, the output folder, the light's file, the maps' size."""
-        p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
-                       help=SCENARIO_HELP)
-        p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
-        p.add_argument("--env", type=Path, metavar="PROBE.exr", help=env_help)
-        p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
 
+def _session_options(p: argparse.ArgumentParser, env_help: str) -> None:
+    """What render and profile share: the scenario, the output folder, the light's file, the maps' size."""
+    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
+                   help=SCENARIO_HELP)
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("--env", type=Path, metavar="PROBE.exr", help=env_help)
+    p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
+
+
+def _render_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "render", "run the AR session: record the scenario, capture the probe (or take --env), track the tag, "
                  "render the virtual objects lit by the maps, tone-map them over the camera frames, and compare each "
                  "frame with the truth frame (the objects lit by the true environment's maps) by FLIP",
                  "arsim render -o session   (or: arsim render scenarios/indoor.toml -o session --env probe.exr --method sh)")
-    session_options(p, "light the objects with this environment instead of the captured probe")
+    _session_options(p, "light the objects with this environment instead of the captured probe")
     p.add_argument("--maps", type=Path, nargs="+", metavar="DIR",
                    help="light the objects with maps baked before (`arsim bake` folders, one per method) instead of the captured probe")
     p.add_argument("--method", choices=sorted(METHODS),
@@ -676,11 +662,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="draw the overlay: frame time and map state (default: [render] overlay, off)")
     p.set_defaults(run=cmd_render)
 
+
+def _profile_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "profile", "profile the render loop while it bakes maps tile by tile (thesis 5.1 step 3): per step and frame "
                  "CPU and GL time against a frame budget, a Chrome trace (Perfetto), a timeline plot and profile.md; "
                  "--sweep compares tile policies (the thesis's table 6.6)",
                  "arsim profile -o prof --tile auto   (or: arsim profile scenarios/indoor.toml -o prof --sweep 32,64,128,auto)")
-    session_options(p, "bake from this environment instead of the captured probe")
+    _session_options(p, "bake from this environment instead of the captured probe")
     p.add_argument("--budget-ms", type=_positive("--budget-ms", float), metavar="X",
                    help="frame budget in ms (default: [profile] budget_ms, 33.3)")
     p.add_argument("--tile", metavar="N|auto", help="tile side baked per frame, or auto (default: [profile] tile, auto)")
@@ -690,6 +678,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stop after K frames even if the bake is not complete (default: [profile] max_frames)")
     p.set_defaults(run=cmd_profile)
 
+
+def _run_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "run", "run a scenario end to end: record (or replay --recording), capture the probe, bake the maps of "
                  "every method it names, run the AR session, evaluate every stage, and write the run directory with "
                  "manifest.json and report/index.html; --baseline compares the frames with a baseline's",
@@ -703,6 +693,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"with --baseline: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
     p.set_defaults(run=cmd_run)
 
+
+def _batch_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "batch", "run many scenarios end to end in parallel processes (or as tasks on a Ray cluster) and write "
                  "one summary of all their metrics and regressions (summary.md, summary.html, summary.json)",
                  "arsim batch scenarios/*.toml -o batch --workers 2   (or: ... --ray auto, --baselines baselines)")
@@ -715,6 +707,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"with --baselines: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
     p.set_defaults(run=cmd_batch)
 
+
+def _diff_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "diff", "visual regression: compare two images, or the frames of two run directories matched by name, "
                  "by FLIP (mean and 99th percentile), PSNR and the largest difference; writes a heatmap per frame that "
                  "differs and an HTML page; exit status 1 when a frame's mean FLIP exceeds --max-flip",
@@ -726,10 +720,27 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g}: any difference fails)")
     p.set_defaults(run=cmd_diff)
 
+
+def _validate_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")
     p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
     p.set_defaults(run=cmd_validate)
+
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="arsim",
+        description="arsim: a simulator of a mobile AR app that captures real-world light and renders virtual objects with it.",
+        epilog="example:\n  arsim info assets/envmaps/city.exr\n\nrun 'arsim COMMAND --help' for the options of a command.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"arsim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for add in (_info_parser, _convert_parser, _bake_parser, _bases_parser, _compare_methods_parser, _record_parser,
+                _capture_parser, _render_parser, _profile_parser, _run_parser, _batch_parser, _diff_parser, _validate_parser):
+        add(sub)
     return parser
 
 

@@ -311,3 +311,42 @@ def visual_figures(v: VisualComparison, path_tiles: Path, path_errors: Path, tit
         with atomic_path(path) as tmp:
             fig.savefig(tmp, format="png", dpi=100)
         plt.close(fig)
+
+
+@dataclass(frozen=True)
+class BasesStudy:
+    """`arsim bases compare`'s results: each basis's mean error over random signals and on the visual
+    comparison's plane, and the files written."""
+
+    errors: dict[str, dict]  # "name count" -> the random signals' statistics (BasesComparison.summary)
+    visual_errors: dict[str, float]  # "name count" -> relative squared error on the plane
+    paths: list[Path]
+
+
+def visual_environment(path: Path | None = None) -> tuple[np.ndarray, str]:
+    """The visual comparison's environment (default: the assets' interior.exr) as a 32-row equirect, and its
+    name; a file that cannot be read, or holds NaN/Inf texels, is refused."""
+    from arsim.core.assets import assets_dir
+    from arsim.core.hdr_io import read_hdr, replace_nonfinite
+    from arsim.core.resample import to_layout
+
+    path = path or assets_dir() / "envmaps" / "interior.exr"
+    env, _ = replace_nonfinite(read_hdr(path), "refuse", str(path))
+    return to_layout(env, "equirect", 32), Path(path).name  # (irradiance is smooth: 32 x 64 samples hold it)
+
+
+def bases_study(out_dir: Path, signals: int, seed: int = 0, selected: list[tuple[str, int]] | None = None,
+                environment: tuple[np.ndarray, str] | None = None, sun_elevation_deg: float = 8.0,
+                sun_share: float = 3.0, progress: Callable[[int], None] = lambda k: None) -> BasesStudy:
+    """The comparison over random signals (bases.md, bases.json, bases.png) and the visual comparison
+    under `environment` (visual_environment's; default: the assets' interior.exr) with a sun at
+    sun_elevation_deg (visual.png, visual_errors.png), written into out_dir."""
+    if not 0.0 <= sun_elevation_deg <= 90.0:
+        raise ArsimError(f"sun elevation {sun_elevation_deg:g} is not an elevation: give 0 to 90 degrees")
+    env, name = environment or visual_environment()
+    comparison = compare_bases(signals, seed, selected, progress=progress)
+    paths = write_bases_comparison(comparison, out_dir)
+    visual = visual_comparison(plane_lighting(env, sun_elevation_deg, 30.0, sun_share), selected=selected)
+    paths += [out_dir / "visual.png", out_dir / "visual_errors.png"]
+    visual_figures(visual, paths[-2], paths[-1], f"{name}, sun at {sun_elevation_deg:g} degrees elevation")
+    return BasesStudy(comparison.summary(), visual.errors(), paths)

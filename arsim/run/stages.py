@@ -1,7 +1,7 @@
-"""The stages composed into the steps the commands run: a capture measured against the truth, an AR
-session's inputs, the AR session rendered and measured, the render loop profiled while it bakes. `arsim run`
-(pipeline.py) chains them all; `arsim capture`, `render` and `profile` call one each; the command line only
-parses, calls and prints.
+"""The stages composed into the steps the commands run: a recording with its plots, a capture measured
+against the truth, an AR session's inputs, the AR session rendered and measured, the render loop profiled
+while it bakes. `arsim run` (pipeline.py) chains them all; `arsim record`, `capture`, `render` and `profile`
+call one each; the command line only parses, calls and prints.
 
 `stage(description)` is a context manager yielding update(completed=None, description=None): a progress
 bar on a terminal, nothing elsewhere (quiet_stage).
@@ -25,6 +25,7 @@ from arsim.core.resample import to_layout
 from arsim.evaluate.capture_report import write_capture
 from arsim.evaluate.diff import masked_flip
 from arsim.evaluate.profile import ProfileRun, write_profile
+from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
 from arsim.evaluate.session import session_metrics
 from arsim.render.baking import BakeSettings
 from arsim.render.content import light_objects, scene_objects
@@ -32,7 +33,7 @@ from arsim.render.session import SessionSettings, check_maps, maps_needed, run_p
 from arsim.scenario import Scenario
 from arsim.scenario.environment import load_environment
 from arsim.sensors.camera import ResponseCurve, SensorSettings
-from arsim.sensors.recording import Recording, load_recording, record
+from arsim.sensors.recording import Recording, RecordSummary, load_recording, record
 
 Stage = Callable[[str], contextlib.AbstractContextManager]
 
@@ -41,6 +42,28 @@ def true_response(scenario: Scenario) -> np.ndarray:
     """The camera's true inverse response (256,), what the capture's calibration is measured against."""
     cam = scenario.device.camera
     return ResponseCurve(cam.response, cam.gamma, cam.contrast).decode(np.arange(256))
+
+
+@dataclasses.dataclass(frozen=True)
+class PlottedRecording:
+    """A recording written with its plots: what was recorded, the share of the sphere its sweep saw,
+    and the share of AR frames with the tag in view (None without an AR path)."""
+
+    summary: RecordSummary
+    coverage: float
+    tag_in_view: float | None
+
+
+def recorded(scenario: Scenario, out: Path, stage: Stage = quiet_stage,
+             description: str = "recording the capture sweep and the AR path") -> PlottedRecording:
+    """The scenario recorded into out (the sweep; its AR path into out/ar), with the plots in out/plots."""
+    with stage(description) as update:
+        summary = record(scenario, out, progress=lambda f: update(completed=f))
+    plots = plot_recording(load_recording(out), out / "plots")
+    tag = None
+    if summary.ar_frames:
+        tag = plot_ar_path(load_recording(out / "ar"), out / "plots" / "ar_path.png")["tag_in_view"]
+    return PlottedRecording(summary, plots["coverage"], tag)
 
 
 def measured_capture(rec: Recording, settings: CaptureSettings, out: Path, stage: Stage = quiet_stage,
@@ -53,6 +76,17 @@ def measured_capture(rec: Recording, settings: CaptureSettings, out: Path, stage
             completed=f, description=f"{description}: {100 * c:.1f} % covered"))
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=settings.size))
     return result, write_capture(result, truth, response_error(result.response, true_response(scenario)), out)
+
+
+def captured_sweep(scenario: Scenario, out: Path, size: int | None = None, align_every: int | None = None,
+                   stage: Stage = quiet_stage) -> tuple[CaptureResult, dict]:
+    """The scenario's sweep alone (no AR path) recorded into out/recording, then captured and measured as
+    measured_capture does; size and align_every override [capture] where given."""
+    sweep = dataclasses.replace(scenario, ar=dataclasses.replace(scenario.ar, enabled=False))
+    with stage("recording the capture sweep") as update:
+        record(sweep, out / "recording", progress=lambda f: update(completed=f))
+    rec = load_recording(out / "recording")
+    return measured_capture(rec, CaptureSettings.of(recording_scenario(rec), size, align_every), out, stage)
 
 
 def session_probe(result: CaptureResult, map_size: int) -> np.ndarray:
