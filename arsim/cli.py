@@ -7,6 +7,7 @@ import contextlib
 import json
 import math
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -20,10 +21,11 @@ from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, w
 from arsim.core.image_stats import image_stats
 from arsim.core.progress import progress_bar
 from arsim.core.resample import LAYOUTS, detect_layout, to_layout
-from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, compare, write_comparison
-from arsim.evaluate.diff import DEFAULT_MAX_FLIP
+from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, check_request, compare, write_comparison
+from arsim.evaluate.diff import DEFAULT_MAX_FLIP, check_max_flip
+from arsim.lighting.accurate import MAX_EXPONENT
 from arsim.lighting.bake_output import write_bake
-from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake, method
+from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 from arsim.sensors.recording import load_recording, recording_segments
 
@@ -329,8 +331,9 @@ def _exponents(text: str) -> list[float]:
             value = float(part)
         except ValueError:
             raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()!r} is not a number; give e.g. --spec 1,10,80") from None
-        if not (np.isfinite(value) and value > 0):
-            raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()} is not allowed: exponents must be positive")
+        if not (np.isfinite(value) and 0 < value <= MAX_EXPONENT):
+            raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()} is not allowed: exponents must be positive "
+                                             f"numbers up to {MAX_EXPONENT:g}")
         if value in values:
             raise argparse.ArgumentTypeError(f"Phong exponent {part.strip()} is given twice; give each once")
         values.append(value)
@@ -351,6 +354,38 @@ def _positive(name: str, kind: type = int):
         return value
 
     return parse
+
+
+def _max_flip(text: str) -> float:
+    """--max-flip: a finite tolerance from 0 (a gate with NaN or inf would pass everything)."""
+    try:
+        return check_max_flip(float(text), "--max-flip")
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--max-flip {text!r} is not a number; give e.g. {DEFAULT_MAX_FLIP:g}") from None
+    except ArsimError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _non_negative(name: str):
+    """An argparse type: an integer from 0 (a seed)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} {text!r} is not an integer") from None
+        if value < 0:
+            raise argparse.ArgumentTypeError(f"{name} {value} is negative: give 0 or more")
+        return value
+
+    return parse
+
+
+def _orders(text: str) -> list[int]:
+    """--sh-orders: integers, each in the sh method's range (checked by compare's check_request)."""
+    try:
+        return [int(o) for o in text.split(",") if o.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--sh-orders {text!r} is not a list of integers; give e.g. 5,10,20") from None
 
 
 def _probe(path: Path, size: int | None) -> np.ndarray:
@@ -381,16 +416,23 @@ def _tracking_p95(m: dict) -> str:
 
 
 def _output_dir(path: Path) -> Path:
+    """-o's folder, created if missing and known writable before any work is done."""
     if path.exists() and not path.is_dir():
         raise ArsimError(f"{path}: exists and is not a folder; give a folder for -o")
-    path.mkdir(parents=True, exist_ok=True)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise ArsimError(f"{path}: cannot write there ({exc.strerror or exc}); give a folder you can write to for -o") from None
     return path
 
 
 def cmd_bake(args: argparse.Namespace) -> int:
+    params = _parameters(args)
+    params.check()  # before any work or output
     env = _probe(args.env, args.size)
     out = _output_dir(args.output)
-    params = _parameters(args)
     with progress_bar(f"baking {len(args.spec)} maps ({args.method})", len(args.spec)) as update:
         result = bake(env, args.spec, args.method, params, progress=lambda k: update(completed=k))
     write_bake(out, args.spec, args.method, params, result, str(args.env))
@@ -399,8 +441,7 @@ def cmd_bake(args: argparse.Namespace) -> int:
 
 
 def cmd_compare_methods(args: argparse.Namespace) -> int:
-    for name in args.methods:
-        method(name)  # an unknown name fails here, before any work
+    check_request(args.methods, _parameters(args), args.sh_orders)  # before any work or output
     env = _probe(args.env, args.size)
     out = _output_dir(args.output)
     stages = 0
@@ -492,6 +533,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
             update(completed=len(finished), description=f"running scenarios: {Path(result['scenario']).stem} done")
 
         summary = run_batch(args.scenarios, out, args.workers, args.ray, args.baselines, args.max_flip, done)
+    for s in summary["scenarios"]:
+        if not s["ok"]:
+            print(f"arsim batch: {s['name']} failed: {s['error']}", file=sys.stderr)
     print(f"{len(summary['scenarios'])} scenarios in {summary['timing']['wall_s']:.1f} s ({summary['timing']['backend']}); "
           f"failed: {', '.join(summary['failed']) or 'none'}; regressions: {', '.join(summary['regressions']) or 'none'}; "
           f"summary {out / 'summary.md'}")
@@ -562,7 +606,7 @@ def _map_options(p: argparse.ArgumentParser) -> None:
                    help="sh: evaluate Y_lm with factorials in double precision as the thesis's Alg. 2.5/2.6")
     p.add_argument("--samples", type=_positive("--samples"), default=MapParameters.samples, metavar="K",
                    help=f"mc: importance samples per texel (default {MapParameters.samples})")
-    p.add_argument("--seed", type=int, default=0, help="mc: random seed (default 0)")
+    p.add_argument("--seed", type=_non_negative("--seed"), default=0, help="mc: random seed, 0 or more (default 0)")
 
 
 def _bake_parser(sub: argparse._SubParsersAction) -> None:
@@ -586,7 +630,7 @@ def _bases_parser(sub: argparse._SubParsersAction) -> None:
     q.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
     q.add_argument("--signals", type=_positive("--signals"), default=100, metavar="N",
                    help="random irradiance signals to average over (default 100)")
-    q.add_argument("--seed", type=int, default=0, help="the first signal's seed (default 0)")
+    q.add_argument("--seed", type=_non_negative("--seed"), default=0, help="the first signal's seed, 0 or more (default 0)")
     q.add_argument("--bases", type=lambda t: [b.strip() for b in t.split(",") if b.strip()], metavar="B,B,...",
                    help="bases with their counts, e.g. sh9,hl2,h4,h6,modh6,hsh9,makhotkin9,zernike6,sh-rh9 (default: all)")
     q.add_argument("--env", type=Path, metavar="ENV.exr", help="the visual comparison's environment (default: assets' interior.exr)")
@@ -605,7 +649,7 @@ def _compare_methods_parser(sub: argparse._SubParsersAction) -> None:
                    metavar="M,M,...", help="methods to compare (default: all but accurate, which is the reference)")
     p.add_argument("--reference-texels", type=_positive("--reference-texels"), metavar="K",
                    help="texels the accurate reference is computed at (default: all up to 128², else 2000 random)")
-    p.add_argument("--sh-orders", type=lambda t: [int(o) for o in t.split(",")] if t else [],
+    p.add_argument("--sh-orders", type=_orders,
                    default=list(DEFAULT_SH_ORDERS), metavar="O,O,...",
                    help="orders of the SH error-against-order study (default " + ",".join(map(str, DEFAULT_SH_ORDERS)) + "; empty to skip)")
     p.set_defaults(run=cmd_compare_methods)
@@ -689,7 +733,7 @@ def _run_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--recording", type=Path, metavar="REC", help="replay this recording (`arsim record`) instead of recording anew")
     p.add_argument("--baseline", type=Path, metavar="DIR", help="compare the run's frames with this baseline (a run directory)")
     p.add_argument("--update-baseline", action="store_true", help="write the run's frames as the baseline DIR instead of comparing")
-    p.add_argument("--max-flip", type=float, default=DEFAULT_MAX_FLIP, metavar="X",
+    p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"with --baseline: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
     p.set_defaults(run=cmd_run)
 
@@ -703,7 +747,7 @@ def _batch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=_positive("--workers"), default=1, metavar="N", help="runs at once on this machine (default 1)")
     p.add_argument("--ray", metavar="ADDRESS", help="run each scenario as a task on the Ray cluster at ADDRESS (host:port, or auto)")
     p.add_argument("--baselines", type=Path, metavar="DIR", help="compare each run's frames with DIR/<scenario name>")
-    p.add_argument("--max-flip", type=float, default=DEFAULT_MAX_FLIP, metavar="X",
+    p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"with --baselines: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
     p.set_defaults(run=cmd_batch)
 
@@ -716,7 +760,7 @@ def _diff_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("a", type=Path, metavar="A", help="the reference: an image, a run directory or a folder of frames")
     p.add_argument("b", type=Path, metavar="B", help="what is compared with it (the same kind as A)")
     p.add_argument("-o", "--output", type=Path, metavar="DIR", help="write heatmaps/, diff.json and index.html here")
-    p.add_argument("--max-flip", type=float, default=DEFAULT_MAX_FLIP, metavar="X",
+    p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g}: any difference fails)")
     p.set_defaults(run=cmd_diff)
 
@@ -754,6 +798,11 @@ def main(argv: list[str] | None = None) -> int:
         return args.run(args)
     except ArsimError as exc:
         print(f"arsim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the disk full, a folder made read-only mid-run: one line naming the path
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"arsim {args.command}: error: {where}{exc.strerror or exc}; free the space or fix the permissions "
+              "and run again", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"arsim {args.command}: interrupted", file=sys.stderr)

@@ -2,6 +2,7 @@
 the same summary; against baselines, a changed scenario is a regression; bad input in one line."""
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -75,7 +76,7 @@ def test_a_changed_scenario_is_a_regression_against_the_baselines(scenarios, loc
               "--workers", "2")
     assert r.returncode == 1, r.stdout + r.stderr
     summary = json.loads((root / "against" / "summary.json").read_text())
-    assert summary["regressions"] == ["two"]
+    assert summary["regressions"] == ["two"] and summary["failed"] == []  # exit 1 with a failing diff: a regression
     assert "REGRESSION" in (root / "against" / "summary.md").read_text()
 
 
@@ -84,3 +85,36 @@ def test_batch_refuses_bad_input_in_one_line(scenarios, tmp_path):
     (tmp_path / "broken.toml").write_text("[run]\nseed = -1\n")
     assert_one_line_error(arsim("batch", paths[0], tmp_path / "broken.toml", "-o", tmp_path / "o"), "broken.toml")
     assert_one_line_error(arsim("batch", paths[0], "-o", tmp_path / "o", "--ray", "127.0.0.1:1"), "no Ray head answers")
+
+
+def test_a_run_that_crashes_is_a_failure_named_with_its_message(scenarios, tmp_path):
+    # the run's process crashes (exit 1 with a traceback, as a bug would): a startup hook makes run_scenario
+    # raise for the scenario named boom
+    root, paths = scenarios
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(
+        "import arsim.run.pipeline as p\n"
+        "def boom(scenario, source, *a, **k):\n"
+        "    raise RuntimeError('simulated crash in ' + source)\n"
+        "p.run_scenario = boom\n")
+    boom = tmp_path / "boom.toml"
+    boom.write_text(paths[0].read_text().replace('name = "one"', 'name = "boom"'))
+    root_dir = Path(__file__).resolve().parents[1]
+    env = os.environ | {"PYTHONPATH": os.pathsep.join([str(hook), str(root_dir), os.environ.get("PYTHONPATH", "")])}
+    r = arsim("batch", boom, "-o", tmp_path / "out", env=env)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "boom failed: RuntimeError: simulated crash" in r.stderr and "failed: boom" in r.stdout
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["failed"] == ["boom"] and summary["scenarios"][0]["ok"] is False
+    assert "| boom | failed: RuntimeError: simulated crash" in (tmp_path / "out" / "summary.md").read_text()
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "-0.1"])
+def test_a_gate_without_a_finite_tolerance_is_refused(scenarios, tmp_path, value):
+    root, paths = scenarios
+    for command in (["diff", ENVMAPS[0], ENVMAPS[0]], ["run", paths[0], "-o", tmp_path / "r", "--baseline", tmp_path],
+                    ["batch", paths[0], "-o", tmp_path / "b", "--baselines", tmp_path]):
+        r = arsim(*command, f"--max-flip={value}")
+        assert_one_line_error(r, "--max-flip")
+        assert not (tmp_path / "r").exists() and not (tmp_path / "b").exists()

@@ -14,8 +14,8 @@ from arsim.core.hdr_io import read_hdr, write_exr
 from tests.conftest import ENVMAPS
 
 
-def arsim(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "arsim", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+def arsim(*args, cwd=None, env=None):
+    return subprocess.run([sys.executable, "-m", "arsim", *map(str, args)], capture_output=True, text=True, cwd=cwd, env=env)
 
 
 def assert_one_line_error(result, *fragments):

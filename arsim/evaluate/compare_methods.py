@@ -3,6 +3,7 @@ against order (stable and thesis-faithful evaluation)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Callable, Sequence
@@ -16,7 +17,7 @@ from arsim.core.files import atomic_path, write_text_atomic
 from arsim.core.hdr_io import tonemap_preview
 from arsim.evaluate.metrics import map_error
 from arsim.lighting.accurate import lobe_average_at
-from arsim.lighting.methods import MapParameters, bake
+from arsim.lighting.methods import MapParameters, bake, method
 from arsim.lighting.sh import sh_maps
 
 DEFAULT_SH_ORDERS = (5, 10, 20, 35, 64, 128)
@@ -68,10 +69,21 @@ def _errors(reference: np.ndarray, maps: np.ndarray, texels: np.ndarray) -> list
     return out
 
 
+def check_request(methods: Sequence[str], params: MapParameters, sh_orders: Sequence[int]) -> None:
+    """Refuse, before any work, an unknown method, a parameter out of range or an SH order out of range
+    (each order of the study as the sh method takes it)."""
+    for name in methods:
+        method(name)
+    params.check()
+    for order in sh_orders:
+        dataclasses.replace(params, sh_order=int(order)).check()
+
+
 def compare(env: np.ndarray, exponents: Sequence[float], methods: Sequence[str], params: MapParameters,
             texel_count: int | None = None, sh_orders: Sequence[int] = DEFAULT_SH_ORDERS,
             progress: Callable[[str], None] = lambda stage: None) -> Comparison:
     """Run every method on env, measure each against accurate at the reference texels."""
+    check_request(methods, params, sh_orders)
     n = env.shape[0]
     texels = reference_texels(n, texel_count)
     progress(f"accurate reference at {len(texels)} texels")

@@ -155,12 +155,19 @@ def compare_images(a: np.ndarray, b: np.ndarray, name: str = "") -> tuple[FrameD
                       int(np.abs(diff).max()), count), error)
 
 
+def check_max_flip(max_flip: float, name: str = "the FLIP limit") -> float:
+    """A gate's tolerance, refused unless finite and at least 0: NaN or infinity would pass every frame."""
+    if not (isinstance(max_flip, (int, float)) and math.isfinite(max_flip) and max_flip >= 0):
+        raise ArsimError(f"{name} {max_flip} is not a tolerance: give a finite number from 0 (any difference fails) "
+                         f"to 1, e.g. {DEFAULT_MAX_FLIP:g}")
+    return float(max_flip)
+
+
 def run_diff(a: Path, b: Path, out_dir: Path | None = None, max_flip: float = DEFAULT_MAX_FLIP,
              progress: Callable[[float], None] = lambda fraction: None) -> DiffResult:
     """Compare b against a; with out_dir, write heatmaps/<frame>.png for the frames that differ,
     diff.json and index.html (a, b and the heatmap side by side)."""
-    if max_flip < 0:
-        raise ArsimError(f"the FLIP limit {max_flip} is negative; give 0 (any difference fails) or more")
+    check_max_flip(max_flip)
     pairs, only_a, only_b = image_pairs(a, b)
     result = DiffResult(str(a), str(b), max_flip, only_in_a=only_a, only_in_b=only_b)
     if out_dir is not None:

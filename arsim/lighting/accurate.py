@@ -73,6 +73,12 @@ def _lobe_sums(out_dirs: np.ndarray, dirs: np.ndarray, weighted: np.ndarray, exp
     return sums
 
 
+# The largest Phong exponent taken: at 1e6 the lobe is 0.06 degrees wide, far below a texel of any map
+# arsim bakes (16384² angle maps: 0.02 degrees a texel is the finest), so larger ones are the same mirror
+# and only overflow the lobe's normalisation.
+MAX_EXPONENT = 1e6
+
+
 def check_inputs(env: np.ndarray, exponents: Sequence[float]) -> None:
     """Refuse what no method can work with: a non-square image, NaN/Inf texels, exponents <= 0."""
     if env.ndim != 3 or env.shape[0] != env.shape[1] or env.shape[2] < 3:
@@ -82,8 +88,8 @@ def check_inputs(env: np.ndarray, exponents: Sequence[float]) -> None:
     if len(exponents) == 0:
         raise ArsimError("no Phong exponents given; give at least one, e.g. --spec 1,10,80")
     for s in exponents:
-        if not (isinstance(s, (int, float)) and np.isfinite(s) and s > 0):
-            raise ArsimError(f"Phong exponent {s} is not allowed: exponents must be positive numbers")
+        if not (isinstance(s, (int, float)) and np.isfinite(s) and 0 < s <= MAX_EXPONENT):
+            raise ArsimError(f"Phong exponent {s} is not allowed: exponents must be positive numbers up to {MAX_EXPONENT:g}")
 
 
 def _block_values(block: np.ndarray, probe: _Probe, exponents: Sequence[float], threshold: float | None) -> np.ndarray:

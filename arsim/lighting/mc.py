@@ -17,10 +17,22 @@ from collections.abc import Sequence
 import numpy as np
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_radius, direction_to_anglemap_st
+from arsim.core.errors import ArsimError
 from arsim.core.resample import extend_beyond_rim
 from arsim.lighting.mipmap import mip_chain, sample_trilinear
 
-CHUNK_TEXELS = 8192
+CHUNK_SAMPLES = 8192 * 64  # samples drawn at once: texels per chunk x samples per texel
+BYTES_PER_SAMPLE = 240  # the chunk's arrays (uniforms, directions, pdf, st, lod, gathered RGB) per sample
+MAX_CHUNK_BYTES = 1 << 30  # one texel's samples must fit in this
+
+
+def check_samples(samples: int) -> None:
+    """Refuse a sample count whose single texel's arrays alone would pass MAX_CHUNK_BYTES."""
+    if samples * BYTES_PER_SAMPLE > MAX_CHUNK_BYTES:
+        raise ArsimError(f"sample count {samples} needs {samples * BYTES_PER_SAMPLE / 2**30:.1f} GiB per texel; "
+                         f"give at most {MAX_CHUNK_BYTES // BYTES_PER_SAMPLE}")
+
+
 # CK07 add 1 to the level of detail; on angle maps, whose coarse levels mix distant directions, that
 # over-blurs: on courtyard and city at 64², bias 0 gave lower mean error than 1 at every K from 4 to 256.
 LOD_BIAS = 0.0
@@ -47,6 +59,7 @@ def sample_phong_lobe(d: np.ndarray, exponent: float, u1: np.ndarray, u2: np.nda
 def mc_maps(env: np.ndarray, exponents: Sequence[float], samples: int = 64, seed: int = 0,
             filtered: bool = True) -> np.ndarray:
     """Maps (E, N, N, 3) float32 from `samples` importance samples per texel (filtered or not)."""
+    check_samples(samples)
     n = env.shape[0]
     chain = mip_chain(extend_beyond_rim(env))
     inside = anglemap_disk_mask(n)
@@ -57,8 +70,9 @@ def mc_maps(env: np.ndarray, exponents: Sequence[float], samples: int = 64, seed
         # One stream per (seed, exponent): a map is the same whether baked alone or with others.
         rng = np.random.default_rng([seed, int(np.float64(s).view(np.uint64))])
         values = np.empty((len(dirs), 3))
-        for start in range(0, len(dirs), CHUNK_TEXELS):
-            d = dirs[start:start + CHUNK_TEXELS]
+        chunk = max(1, CHUNK_SAMPLES // samples)  # memory bounded whatever the sample count
+        for start in range(0, len(dirs), chunk):
+            d = dirs[start:start + chunk]
             u1, u2 = rng.random((2, len(d), samples))
             w, pdf = sample_phong_lobe(d, s, u1, u2)
             st = direction_to_anglemap_st(w.reshape(-1, 3))

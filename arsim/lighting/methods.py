@@ -18,7 +18,7 @@ import numpy as np
 from arsim.core.errors import ArsimError
 from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, accurate_maps, check_inputs
 from arsim.lighting.fast import fast_coefficients, fast_maps
-from arsim.lighting.mc import mc_maps
+from arsim.lighting.mc import check_samples, mc_maps
 from arsim.lighting.mipmap import mipmap_maps
 from arsim.lighting.sh import MAX_ORDER, sh_coefficients, sh_maps
 
@@ -41,6 +41,9 @@ class MapParameters:
             raise ArsimError(f"SH order {self.sh_order} is out of range: give 1 to {MAX_ORDER}")
         if self.samples < 1:
             raise ArsimError(f"sample count {self.samples} is out of range: give at least 1")
+        check_samples(self.samples)
+        if self.seed < 0:
+            raise ArsimError(f"seed {self.seed} is negative: give 0 or more")
         if not 0 < self.bounds_threshold < 1:
             raise ArsimError(f"bounds threshold {self.bounds_threshold} is out of range: give a value in (0, 1)")
 

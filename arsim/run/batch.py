@@ -24,6 +24,7 @@ from pathlib import Path
 
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
+from arsim.evaluate.diff import check_max_flip
 from arsim.scenario.loader import scenario_path
 
 # (key in the run's metrics, column title, digits)
@@ -55,19 +56,27 @@ def run_command(scenario: Path, out: Path, baseline: Path | None, max_flip: floa
 
 def run_one(scenario: str, out: str, baseline: str | None, max_flip: float) -> dict:
     """One scenario's `arsim run` (also what a Ray task runs): its status, metrics and regression."""
-    start = time.perf_counter()
+    start, started = time.perf_counter(), time.time()
     done = subprocess.run(run_command(Path(scenario), Path(out), Path(baseline) if baseline else None, max_flip),
                           capture_output=True, text=True, env=os.environ | {"PYTHONUNBUFFERED": "1"})
-    result = {"scenario": scenario, "out": out, "returncode": done.returncode, "wall_s": time.perf_counter() - start,
-              "error": done.stderr.strip().splitlines()[-1] if done.returncode not in (0, 1) and done.stderr.strip() else None}
-    manifest = Path(out) / "manifest.json"
-    if manifest.is_file():
+    result = {"scenario": scenario, "out": out, "returncode": done.returncode, "wall_s": time.perf_counter() - start}
+
+    def written(path: Path) -> bool:  # by this run: a file left by an earlier run into the folder does not count
+        return path.is_file() and path.stat().st_mtime >= started
+
+    manifest, diff = Path(out) / "manifest.json", Path(out) / "diff" / "diff.json"
+    if written(manifest):
         result["metrics"] = json.loads(manifest.read_text(encoding="utf-8"))["metrics"]
-    diff = Path(out) / "diff" / "diff.json"
-    if baseline is not None and diff.is_file():
+    if baseline is not None and written(diff):
         d = json.loads(diff.read_text(encoding="utf-8"))
         result["regression"] = {"passed": d["passed"], "flip_max": d["flip_max"], "worst_frame": d["worst_frame"],
                                 "frames_over_threshold": d["frames_over_threshold"]}
+    # exit 1 is a regression only where the run wrote its manifest and a failing diff; any other status
+    # (a crash also exits 1) is a failed run
+    regressed = "metrics" in result and not result.get("regression", {}).get("passed", True)
+    result["ok"] = done.returncode == 0 or (done.returncode == 1 and regressed)
+    lines = done.stderr.strip().splitlines()
+    result["error"] = None if result["ok"] else (lines[-1] if lines else f"exit status {done.returncode}")
     return result
 
 
@@ -124,6 +133,7 @@ def run_batch(scenarios: list[Path], out: Path, workers: int = 1, ray_address: s
     names = [s.stem for s in scenarios]
     if len(set(names)) != len(names):
         raise ArsimError("two scenarios have the same file name; their runs would share a folder: rename one")
+    max_flip = check_max_flip(max_flip, "the batch's FLIP limit")
     jobs = [(str(s.resolve()), str((out / s.stem).resolve()),
              str((baselines / s.stem).resolve()) if baselines is not None else None, max_flip) for s in scenarios]
     start = time.perf_counter()
@@ -133,7 +143,7 @@ def run_batch(scenarios: list[Path], out: Path, workers: int = 1, ray_address: s
     results.sort(key=lambda r: order[r["scenario"]])
     summary = {"scenarios": [{**{k: v for k, v in r.items() if k not in ("wall_s", "out")}, "name": Path(r["scenario"]).stem}
                              for r in results],
-               "failed": [Path(r["scenario"]).stem for r in results if r["returncode"] not in (0, 1)],
+               "failed": [Path(r["scenario"]).stem for r in results if not r["ok"]],
                "regressions": [Path(r["scenario"]).stem for r in results if not r.get("regression", {}).get("passed", True)]}
     write_text_atomic(out / "summary.md", summary_markdown(summary))
     write_text_atomic(out / "summary.html", summary_html(summary))
@@ -153,7 +163,7 @@ def _rows(summary: dict) -> tuple[list[str], list[list[str]]]:
     header = ["scenario", "status"] + [title for _, title, _ in COLUMNS] + ["against baseline"]
     rows = []
     for s in summary["scenarios"]:
-        status = "ok" if s["returncode"] in (0, 1) else f"failed: {s['error'] or 'exit ' + str(s['returncode'])}"
+        status = "ok" if s["ok"] else f"failed: {s['error']}"
         reg = s.get("regression")
         against = "n/a" if reg is None else ("passed" if reg["passed"] else
                                               f"REGRESSION: FLIP {reg['flip_max']:.5f} ({reg['worst_frame']})")

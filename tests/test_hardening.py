@@ -1,0 +1,68 @@
+"""Bad input and a hostile machine, as an adversarial user meets them: each ends in one line and exit
+status 2 (no traceback), before any output folder is made; gates refuse a tolerance that passes anything."""
+
+import errno
+
+import pytest
+
+import arsim.cli as cli
+from tests.conftest import ENVMAPS
+from tests.test_cli import arsim, assert_one_line_error
+
+ENV = ENVMAPS[0]
+
+
+@pytest.mark.parametrize("options, fragment", [
+    (["--spec", "1e308"], "up to 1e+06"),
+    (["--method", "mc", "--seed", "-1"], "--seed -1 is negative"),
+    (["--method", "mc", "--samples", "1000000000"], "GiB per texel"),
+    (["--method", "sh", "--sh-order", "100000"], "SH order 100000"),
+])
+def test_bake_refuses_an_option_out_of_range_before_any_output(tmp_path, options, fragment):
+    assert_one_line_error(arsim("bake", ENV, "-o", tmp_path / "maps", "--size", "16", *options), fragment)
+    assert not (tmp_path / "maps").exists()
+
+
+@pytest.mark.parametrize("orders, fragment", [("-3", "SH order -3"), ("5000", "SH order 5000"), ("x", "not a list")])
+def test_compare_methods_refuses_sh_orders_out_of_range_before_any_work(tmp_path, orders, fragment):
+    # 5000 grew to 20 GB before the orders were checked; now refused at once
+    assert_one_line_error(arsim("compare-methods", ENV, "-o", tmp_path / "c", "--size", "16", "--sh-orders", orders), fragment)
+    assert not (tmp_path / "c").exists()
+
+
+def test_an_output_folder_under_a_file_or_unwritable_is_refused_in_one_line(tmp_path):
+    (tmp_path / "afile").write_text("x")
+    assert_one_line_error(arsim("bake", ENV, "-o", tmp_path / "afile" / "maps", "--size", "16"), "cannot write there")
+    assert_one_line_error(arsim("bake", ENV, "-o", "/proc/arsim-maps", "--size", "16"), "/proc/arsim-maps", "cannot write there")
+
+
+def test_a_full_disk_while_writing_is_one_line_naming_the_file(tmp_path, monkeypatch, capsys):
+    # the disk fills after the checks, mid-run: the OS error reaches the command line, which names the path
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "maps" / "maps.json"))
+
+    monkeypatch.setattr("arsim.cli.write_bake", full)
+    status = cli.main(["bake", str(ENV), "-o", str(tmp_path / "maps"), "--size", "16", "--spec", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1
+    assert "maps.json: No space left on device" in err[0]
+
+
+def test_mc_memory_is_bounded_by_the_chunk_not_the_sample_count():
+    # 2^16 samples per texel over an 8² map's 52 disk texels: drawn for all texels at once, the peak
+    # was 0.9 GB; a chunk of CHUNK_SAMPLES samples (8 texels) keeps it near 0.13 GB
+    import tracemalloc
+
+    import numpy as np
+
+    from arsim.lighting.mc import BYTES_PER_SAMPLE, CHUNK_SAMPLES, mc_maps
+
+    env = np.random.default_rng(0).random((8, 8, 3)).astype(np.float32)
+    tracemalloc.start()
+    try:
+        maps = mc_maps(env, [10.0], samples=1 << 16, seed=1)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert np.isfinite(maps).all() and maps.max() > 0
+    assert peak < 1.5 * CHUNK_SAMPLES * BYTES_PER_SAMPLE, peak
