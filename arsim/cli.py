@@ -119,7 +119,11 @@ def _run_info(args: argparse.Namespace) -> int:
 
 
 def _recording_info(args: argparse.Namespace) -> int:
+    from arsim.sensors.frames import check_frame_pixels
+
     rec = load_recording(args.file)
+    with progress_bar("decoding the frames", 1.0) as update:
+        decoded = check_frame_pixels(rec, progress=lambda f: update(completed=f))
     summary = {
         "recording": str(args.file),
         "format": rec.meta["format"],
@@ -130,6 +134,7 @@ def _recording_info(args: argparse.Namespace) -> int:
         "imu_samples": {name: len(stream.t_ns) for name, stream in rec.imu.items()},
         "fusion": rec.meta["fusion"],
         "segment": rec.meta.get("segment", "capture"),
+        "frames_decoded": decoded,
     }
     if "table" in rec.meta:
         summary["tag"] = {k: rec.meta["table"][k] for k in ("tag_family", "tag_id", "tag_size_m")}

@@ -177,3 +177,76 @@ def test_the_ar_path_shows_the_tag_where_the_truth_says(tmp_path):
     found = np.array(found)
     assert 0.2 < (~seen).mean() < 0.6  # the look-away window hides it for a while
     assert found[seen].mean() >= 0.9 and not found[~seen].any()
+
+
+def _meta(folder, change):
+    import json
+
+    meta = json.loads((folder / "meta.json").read_text())
+    (folder / "meta.json").write_text(json.dumps(change(meta)))
+
+
+def _csv_line(folder, name, k, change):
+    lines = (folder / name).read_text().splitlines()
+    lines[k] = change(lines[k])
+    (folder / name).write_text("\n".join(lines) + "\n")
+
+
+def _replace_with_folder(path):
+    path.unlink()
+    path.mkdir()
+
+
+MUTATIONS = {  # what an adversarial user did to a recording -> what the one line must say
+    "meta is a list": (lambda f: (f / "meta.json").write_text("[1, 2]"), "not an object"),
+    "meta lacks seed": (lambda f: _meta(f, lambda m: {k: v for k, v in m.items() if k != "seed"}), "lacks 'seed'"),
+    "meta lacks camera": (lambda f: _meta(f, lambda m: {k: v for k, v in m.items() if k != "camera"}), "lacks 'camera'"),
+    "meta lacks the scenario": (lambda f: _meta(f, lambda m: {k: v for k, v in m.items() if k != "scenario_toml"}),
+                                "lacks 'scenario_toml'"),
+    "seed is a string": (lambda f: _meta(f, lambda m: m | {"seed": "zero"}), "seed is not"),
+    "fps is a string": (lambda f: _meta(f, lambda m: m | {"camera": m["camera"] | {"fps": "fast"}}), "camera.fps is 'fast'"),
+    "k1 is 3.5": (lambda f: _meta(f, lambda m: m | {"camera": m["camera"] | {"k1": 3.5}}), "camera.k1 = 3.5 is out of range"),
+    "mount is not a rotation": (lambda f: _meta(f, lambda m: m | {"camera_to_device": [[2, 0, 0], [0, 1, 0], [0, 0, 1]]}),
+                                "not a 3 x 3 rotation"),
+    "meta not UTF-8": (lambda f: (f / "meta.json").write_bytes(b"\xff\xfe{"), "not valid JSON"),
+    "a short CSV row": (lambda f: _csv_line(f, "frames.csv", 3, lambda line: line.rsplit(",", 1)[0]), "line 4 has 3 fields"),
+    "a zero quaternion": (lambda f: _csv_line(f, "orientation.csv", 2, lambda line: line.split(",")[0] + ",0,0,0,0"),
+                          "line 3 has a zero quaternion"),
+    "orientation header only": (lambda f: (f / "orientation.csv").write_text("t_ns,qx,qy,qz,qw\n"), "need at least 2"),
+    "imu.csv is a folder": (lambda f: _replace_with_folder(f / "imu.csv"), "not a file"),
+    "frames.csv not UTF-8": (lambda f: (f / "frames.csv").write_bytes(b"t_ns,exposure_ns,iso,file\n\xff\xff,1,2,3\n"),
+                             "not UTF-8"),
+    "an empty frame": (lambda f: (f / "frames" / "000003.png").write_bytes(b""), "000003.png: is not a PNG"),
+    "a frame of the wrong size": (lambda f: __import__("cv2").imwrite(str(f / "frames" / "000004.png"),
+                                                                      np.zeros((1, 1, 3), np.uint8)),
+                                  "000004.png: is 1 x 1, the camera's frames are 96 x 72"),
+}
+
+
+@pytest.mark.parametrize("name", list(MUTATIONS))
+def test_a_mutated_recording_is_refused_in_one_line_naming_the_file(recordings, tmp_path, capsys, name):
+    import shutil
+
+    import arsim.cli as cli
+
+    mutate, fragment = MUTATIONS[name]
+    rec = tmp_path / "rec"
+    shutil.copytree(recordings["a"], rec, ignore=shutil.ignore_patterns("ar", "plots"))
+    mutate(rec)
+    status = cli.main(["info", str(rec)])
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert status == 2 and len(lines) == 1 and captured.out == "", captured.err
+    assert fragment in lines[0] and str(rec) in lines[0], lines[0]
+
+
+def test_info_decodes_every_frame(recordings, tmp_path):
+    import shutil
+
+    # a frame whose header is intact but whose pixels are cut off: only decoding it finds that
+    rec = tmp_path / "rec"
+    shutil.copytree(recordings["a"], rec, ignore=shutil.ignore_patterns("ar", "plots"))
+    data = (rec / "frames" / "000002.png").read_bytes()
+    (rec / "frames" / "000002.png").write_bytes(data[:40])
+    load_recording(rec)  # the header alone is read at load
+    assert_one_line_error(arsim("info", rec), "000002.png", "cannot be read")

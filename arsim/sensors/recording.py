@@ -321,17 +321,115 @@ class Recording:
     groundtruth: tuple[np.ndarray, np.ndarray, Rotation]
 
 
+# meta.json as a recording declares it (README: Recording format): key -> (type, what it must hold);
+# a type of None means any JSON value. "table" only in an AR path's recording.
+_NUMBER = (int, float)
+META_SCHEMA = {
+    "format": (str, lambda v: v == FORMAT, f"{FORMAT}"),
+    "seed": (int, lambda v: v >= 0, "an integer from 0"),
+    "duration_s": (_NUMBER, lambda v: math.isfinite(v) and v > 0, "a positive number of seconds"),
+    "camera": (dict, lambda v: _camera_problem(v) is None, "the camera (width, height, fx, fy, cx, cy, k1, k2, fps)"),
+    "camera_to_device": (list, lambda v: _rotation_problem(v) is None, "a 3 x 3 rotation matrix"),
+    "fusion": (str, lambda v: True, "the fusion's name"),
+    "scenario_toml": (str, lambda v: True, "the scenario as TOML text"),
+}
+_CAMERA = {"width": (1, 1 << 15), "height": (1, 1 << 15), "fx": (1e-3, 1e6), "fy": (1e-3, 1e6), "cx": (-1e6, 1e6),
+           "cy": (-1e6, 1e6), "k1": (-1.0, 1.0), "k2": (-1.0, 1.0), "fps": (1e-3, 1e4)}
+
+
+def _camera_problem(cam: dict) -> str | None:
+    for key, (lo, hi) in _CAMERA.items():
+        v = cam.get(key)
+        if isinstance(v, bool) or not isinstance(v, int if key in ("width", "height") else _NUMBER):
+            return f"camera.{key} is {v!r}, not {'an integer' if key in ('width', 'height') else 'a number'}"
+        if not lo <= v <= hi:
+            return f"camera.{key} = {v} is out of range: {lo:g} to {hi:g}"
+    return None
+
+
+def _rotation_problem(m: list) -> str | None:
+    try:
+        a = np.array(m, dtype=np.float64)
+    except (TypeError, ValueError):
+        return "not a matrix of numbers"
+    if a.shape != (3, 3) or not np.isfinite(a).all() or not np.allclose(a @ a.T, np.eye(3), atol=1e-6):
+        return "not a 3 x 3 rotation"
+    return None
+
+
+def check_meta(meta, path: Path) -> None:
+    """meta.json against META_SCHEMA: one ArsimError naming the key and what it must hold."""
+    if not isinstance(meta, dict):
+        raise ArsimError(f"{path}: holds a JSON {type(meta).__name__}, not an object; give a recording's meta.json")
+    if meta.get("format") != FORMAT:
+        raise ArsimError(f"{path}: format {meta.get('format')!r} is not known; this arsim reads {FORMAT}")
+    for key, (kind, ok, what) in META_SCHEMA.items():
+        if key not in meta:
+            raise ArsimError(f"{path}: lacks {key!r} ({what}); record again")
+        v = meta[key]
+        if isinstance(v, bool) or not isinstance(v, kind) or not ok(v):
+            detail = (_camera_problem(v) if key == "camera" and isinstance(v, dict) else
+                      _rotation_problem(v) if key == "camera_to_device" and isinstance(v, list) else None)
+            raise ArsimError(f"{path}: {key} is not {what}" + (f" ({detail})" if detail else f": {str(v)[:60]!r}"))
+    table = meta.get("table")
+    if table is not None:
+        ok = (isinstance(table, dict) and isinstance(table.get("tag_family"), str) and type(table.get("tag_id")) is int
+              and isinstance(table.get("tag_size_m"), _NUMBER) and 0 < table["tag_size_m"] < 100
+              and np.shape(table.get("tag_corners_world")) == (4, 3))
+        if not ok:
+            raise ArsimError(f"{path}: table is not the tag's description (tag_family, tag_id, tag_size_m, "
+                             "tag_corners_world); record again")
+
+
 def _read_csv(path: Path, header: list[str]) -> list[list[str]]:
-    if not path.exists():
-        raise ArsimError(f"{path}: missing from the recording; record it again")
-    with path.open(newline="") as f:
-        rows = list(csv.reader(f))
+    """A recording's CSV: its header as expected, every row as long as the header."""
+    if not path.is_file():
+        raise ArsimError(f"{path}: missing from the recording (or not a file); record it again")
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            rows = list(csv.reader(f))
+    except UnicodeDecodeError:
+        raise ArsimError(f"{path}: is not UTF-8 text; record it again") from None
+    except (OSError, csv.Error) as exc:
+        raise ArsimError(f"{path}: cannot be read ({getattr(exc, 'strerror', None) or exc}); record it again") from None
     if not rows or rows[0] != header:
         raise ArsimError(f"{path}: header is {rows[0] if rows else 'missing'}, expected {','.join(header)}")
+    for k, row in enumerate(rows[1:], 2):
+        if len(row) != len(header):
+            raise ArsimError(f"{path}: line {k} has {len(row)} fields, expected {len(header)} ({','.join(header)})")
     return rows[1:]
 
 
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _check_frame_header(path: Path, width: int, height: int) -> None:
+    """A frame's PNG header read (not its pixels: `arsim info` decodes them): a PNG of the camera's size."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(24)
+    except OSError as exc:
+        raise ArsimError(f"{path}: cannot be read ({exc.strerror or exc}); record again") from None
+    if len(head) < 24 or not head.startswith(PNG_SIGNATURE) or head[12:16] != b"IHDR":
+        raise ArsimError(f"{path}: is not a PNG image (empty, truncated or another format); record again")
+    w, h = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    if (w, h) != (width, height):
+        raise ArsimError(f"{path}: is {w} x {h}, the camera's frames are {width} x {height}; record again")
+
+
+def _rotations(path: Path, t_ns: np.ndarray, q: np.ndarray, what: str) -> Rotation:
+    """Quaternions (K, 4) as rotations: at least two (they are interpolated), none of zero length."""
+    if len(q) < 2:
+        raise ArsimError(f"{path}: holds {len(q)} {what}, need at least 2; record again")
+    norms = np.linalg.norm(q, axis=1)
+    if (norms < 1e-6).any():
+        raise ArsimError(f"{path}: line {int(np.flatnonzero(norms < 1e-6)[0]) + 2} has a zero quaternion; record again")
+    return Rotation.from_quat(q)
+
+
 def _numbers(path: Path, rows: list[list[str]], columns: slice) -> np.ndarray:
+    if not rows:
+        return np.zeros((0, columns.stop - columns.start))
     try:
         values = np.array([[float(v) for v in row[columns]] for row in rows], dtype=np.float64)
     except ValueError as exc:
@@ -356,11 +454,12 @@ def load_recording(folder: Path) -> Recording:
     if not (folder / "meta.json").exists():
         raise ArsimError(f"{folder}: not a recording (no meta.json); give a folder written by arsim record")
     try:
-        meta = json.loads((folder / "meta.json").read_text())
-    except json.JSONDecodeError as exc:
+        meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ArsimError(f"{folder / 'meta.json'}: is not valid JSON ({exc})") from None
-    if meta.get("format") != FORMAT:
-        raise ArsimError(f"{folder / 'meta.json'}: format {meta.get('format')!r} is not known; this arsim reads {FORMAT}")
+    except OSError as exc:
+        raise ArsimError(f"{folder / 'meta.json'}: cannot be read ({exc.strerror or exc}); record again") from None
+    check_meta(meta, folder / "meta.json")
 
     path = folder / "frames.csv"
     rows = _read_csv(path, ["t_ns", "exposure_ns", "iso", "file"])
@@ -375,6 +474,9 @@ def load_recording(folder: Path) -> Recording:
     if extra:
         raise ArsimError(f"{folder / 'frames'}: {len(extra)} frames are not in frames.csv, first {extra[0]}; remove them or list them")
     frames = [{"t_ns": int(n[0]), "exposure_ns": int(n[1]), "iso": float(n[2]), "file": f} for n, f in zip(numbers, listed)]
+    cam = meta["camera"]
+    for name in listed:
+        _check_frame_header(folder / name, cam["width"], cam["height"])
 
     path = folder / "burst.csv"
     rows = _read_csv(path, ["exposure_ns", "iso", "file"])
@@ -382,6 +484,8 @@ def load_recording(folder: Path) -> Recording:
     missing = [row[2] for row in rows if not (folder / row[2]).exists()]
     if missing:
         raise ArsimError(f"{path}: {len(missing)} listed burst frames are missing, first {missing[0]}; record again")
+    for row in rows:
+        _check_frame_header(folder / row[2], cam["width"], cam["height"])
     burst = [{"exposure_ns": int(n[0]), "iso": float(n[1]), "file": row[2]} for n, row in zip(numbers, rows)]
 
     path = folder / "imu.csv"
@@ -400,9 +504,9 @@ def load_recording(folder: Path) -> Recording:
     path = folder / "orientation.csv"
     values = _numbers(path, _read_csv(path, ["t_ns", "qx", "qy", "qz", "qw"]), slice(0, 5))
     _increasing(path, values[:, 0].astype(np.int64), "orientations")
-    orientation = (values[:, 0].astype(np.int64), Rotation.from_quat(values[:, 1:]))
+    orientation = (values[:, 0].astype(np.int64), _rotations(path, values[:, 0], values[:, 1:], "orientations"))
     path = folder / "groundtruth.csv"
     values = _numbers(path, _read_csv(path, ["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"]), slice(0, 8))
     _increasing(path, values[:, 0].astype(np.int64), "ground-truth poses")
-    groundtruth = (values[:, 0].astype(np.int64), values[:, 1:4], Rotation.from_quat(values[:, 4:]))
+    groundtruth = (values[:, 0].astype(np.int64), values[:, 1:4], _rotations(path, values[:, 0], values[:, 4:], "ground-truth poses"))
     return Recording(folder, meta, frames, burst, imu, orientation, groundtruth)
