@@ -806,8 +806,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except OSError as exc:  # the disk full, a folder made read-only mid-run: one line naming the path
         where = f"{exc.filename}: " if exc.filename else ""
-        print(f"arsim {args.command}: error: {where}{exc.strerror or exc}; free the space or fix the permissions "
-              "and run again", file=sys.stderr)
+        print(f"arsim {args.command}: error: {where}{exc.strerror or exc}; check the path, the free space and the "
+              "permissions, then run again", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"arsim {args.command}: interrupted", file=sys.stderr)

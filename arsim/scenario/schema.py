@@ -224,13 +224,22 @@ def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, pa
             raise ScenarioError(f"{where} {name} = {_describe(raw)} has the wrong type: expected {_type_name(tp)}") from None
         _check_value(name, value, f.metadata, where, raw)
         if tp is Path or Path in typing.get_args(tp):
-            resolved, candidates = resolver.resolve(value)
-            if f.metadata["must_exist"] and not resolved.exists():
+            try:
+                resolved, candidates = resolver.resolve(value)
+                found = resolved.is_file()
+            except (RuntimeError, ValueError, OSError) as exc:  # ~nosuchuser, a NUL byte, a name too long
+                raise ScenarioError(f"{where} {name} = {_describe(raw)[:80]}: is not a usable path ({exc}); fix the path") from None
+            if f.metadata["must_exist"] and not found:
                 looked = " or ".join(str(c) for c in candidates)
-                raise ScenarioError(f"{where} {name} = {_describe(raw)}: no such file (looked for {looked}); fix the path")
+                what = "a folder, not a file" if resolved.is_dir() else "no such file"
+                raise ScenarioError(f"{where} {name} = {_describe(raw)[:80]}: {what} (looked for {looked[:300]}); fix the path")
             value = resolved
         values[name] = value
-    return cls(**values)
+    section = cls(**values)
+    problem = section.rules() if hasattr(section, "rules") else None  # cross-field rules, once the fields are checked
+    if problem:
+        raise ScenarioError(f"{where} {problem}")
+    return section
 
 
 def section_to_dict(obj: Any) -> dict[str, Any]:

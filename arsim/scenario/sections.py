@@ -101,6 +101,14 @@ class CameraSection:
     latency_frames: int = setting(3, min=0, max=30, unit="frames", help="delay before new settings apply")
     settle_frames: int = setting(16, min=1, max=1000, unit="frames", help="frames the auto-exposure takes to settle")
 
+    def rules(self) -> str | None:
+        if self.iso_min > self.iso_max:
+            return f"iso_min = {self.iso_min:g} is above iso_max = {self.iso_max:g}: give iso_min <= iso_max"
+        if self.exposure_min_s > self.exposure_max_s:
+            return (f"exposure_min_s = {self.exposure_min_s:g} is above exposure_max_s = {self.exposure_max_s:g}: "
+                    "give exposure_min_s <= exposure_max_s")
+        return None
+
 
 @dataclass(frozen=True)
 class DeviceSection:
@@ -148,6 +156,10 @@ class LookAwaySection:
     start_s: float = setting(8.0, min=0.0, max=3600.0, unit="s", help="when the view starts to swing away")
     end_s: float = setting(11.0, min=0.0, max=3600.0, unit="s", help="when it is back on the tag")
 
+    def rules(self) -> str | None:
+        """The cross-field rule (parse_section applies each section's rules once it is built)."""
+        return None if self.start_s < self.end_s else f"start_s = {self.start_s} is not before end_s = {self.end_s}"
+
 
 @dataclass(frozen=True)
 class ArSection:
@@ -170,6 +182,9 @@ class ArSection:
                                                 help="table top along world x and z, centred on the tag")
     table_albedo: tuple[float, float, float] = setting((0.30, 0.20, 0.12), min=0.0, max=1.0,
                                                        help="diffuse reflectance of the table top (linear RGB)")
+
+    def rules(self) -> str | None:
+        return None if self.near_m <= self.far_m else f"far_m = {self.far_m} is below near_m = {self.near_m}: give near_m <= far_m"
 
 
 MAP_METHODS = tuple(METHODS)
@@ -215,6 +230,11 @@ class RenderObjectSection:
                                   "table, counter-clockwise seen from above (0: it stands still); it takes lighting = ibl, "
                                   "lightmap-ao or volume (light maps are baked where objects stand)")
     orbit_period_s: float = setting(8.0, min=0.1, max=3600.0, unit="s", help="orbit_m > 0: the time of one turn")
+
+    def rules(self) -> str | None:
+        if self.kind == "mesh" and self.mesh is None:
+            return 'kind = "mesh" needs mesh = "FILE" (an OBJ, PLY, STL, OFF or glTF file)'
+        return None
 
 
 @dataclass(frozen=True)

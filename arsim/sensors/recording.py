@@ -142,11 +142,9 @@ def frame_count(trajectory: Trajectory, fps: float) -> int:
 
 def ar_path(scenario: Scenario) -> ARPath:
     a = scenario.ar
-    if a.far_m < a.near_m:
-        raise ArsimError(f"[ar] far_m = {a.far_m} is below near_m = {a.near_m}: give near_m <= far_m")
-    for w in a.look_away:
-        if not w.start_s < w.end_s:
-            raise ArsimError(f"[[ar.look_away]] start_s = {w.start_s} is not before end_s = {w.end_s}")
+    for where, section in (("[ar]", a), *(("[[ar.look_away]]", w) for w in a.look_away)):
+        if problem := section.rules():  # (the schema applies them at load; a scenario built in code meets them here)
+            raise ArsimError(f"{where} {problem}")
     return ARPath(a.duration_s, a.laps, a.near_m, a.far_m, a.shake_deg, tuple((w.start_s, w.end_s) for w in a.look_away))
 
 

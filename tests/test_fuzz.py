@@ -1,0 +1,54 @@
+"""Fuzzing on a bounded budget (benchmarks/fuzz.py runs the long profile): scenarios drawn from the
+schema, recordings damaged file by file and `bake`'s options either load or are refused with one
+ArsimError line; nothing else escapes."""
+
+import shutil
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+
+from arsim.core.errors import ArsimError
+from arsim.scenario.loader import parse_scenario
+from tests.conftest import ENVMAPS
+from tests.fuzzing import bake_options, outcome, recording_mutations, scenario_texts
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(scenario_texts())
+def test_a_fuzzed_scenario_loads_or_is_refused_in_one_line(text):
+    try:
+        parse_scenario(text, "fuzz.toml")
+    except ArsimError as exc:
+        assert "\n" not in str(exc).strip(), str(exc)
+
+
+@pytest.fixture(scope="module")
+def small_recording(tmp_path_factory):
+    from tests.test_cli import arsim
+    from tests.test_recording import SHORT
+
+    root = tmp_path_factory.mktemp("fuzzrec")
+    (root / "s.toml").write_text(SHORT.format(seed=3).replace("[ar]\nduration_s = 2.0", "[ar]\nenabled = false"))
+    r = arsim("record", root / "s.toml", "-o", root / "rec")
+    assert r.returncode == 0, r.stderr
+    return root / "rec"
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(mutate=recording_mutations())
+def test_a_damaged_recording_is_read_or_refused_in_one_line(small_recording, tmp_path_factory, capsys, mutate):
+    rec = tmp_path_factory.mktemp("mut") / "rec"
+    shutil.copytree(small_recording, rec, ignore=shutil.ignore_patterns("plots"))
+    what = mutate(rec)
+    result = outcome(["info", str(rec)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert result == "ok" or len(err) == 1, (what, err)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(options=bake_options())
+def test_fuzzed_bake_options_bake_or_are_refused_in_one_line(tmp_path_factory, capsys, options):
+    out = tmp_path_factory.mktemp("bake") / "maps"
+    result = outcome(["bake", str(ENVMAPS[0]), "-o", str(out), "--size", "16", *options])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert result == "ok" or (len(err) == 1 and not out.exists()), (options, err)
