@@ -250,3 +250,23 @@ def test_info_decodes_every_frame(recordings, tmp_path):
     (rec / "frames" / "000002.png").write_bytes(data[:40])
     load_recording(rec)  # the header alone is read at load
     assert_one_line_error(arsim("info", rec), "000002.png", "cannot be read")
+
+
+def test_recording_again_over_a_killed_recording_replaces_it(recordings, tmp_path):
+    import shutil
+
+    # a record killed mid-write leaves an atomic writer's temp frame and frames of its own; the next record
+    # into the folder must neither fail on them nor keep them
+    rec = tmp_path / "rec"
+    shutil.copytree(recordings["a"], rec)
+    (rec / "frames" / ".000007.k2j3h4.tmp.png").write_bytes(b"\x89PNG half")
+    shutil.copy(rec / "frames" / "000001.png", rec / "frames" / "999999.png")
+    (tmp_path / "a.toml").write_text(SHORT.format(seed=1))
+    r = arsim("record", tmp_path / "a.toml", "-o", rec)
+    assert r.returncode == 0, r.stderr
+    assert not (rec / "frames" / ".000007.k2j3h4.tmp.png").exists() and not (rec / "frames" / "999999.png").exists()
+    assert filecmp.cmp(rec / "frames.csv", recordings["a"] / "frames.csv", shallow=False)
+    load_recording(rec)
+    # a temp frame alone (the writer killed after the recording was complete) is not a frame of the recording
+    (rec / "frames" / ".000003.abcd.tmp.png").write_bytes(b"")
+    load_recording(rec)

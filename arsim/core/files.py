@@ -35,6 +35,20 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         tmp.unlink(missing_ok=True)
 
 
+def is_temporary(path: Path) -> bool:
+    """A file atomic_path left behind (the writer was killed before its rename): .<stem>.<random>.tmp<suffix>."""
+    return path.name.startswith(".") and ".tmp" in path.name
+
+
+def clear_files(folder: Path, pattern: str) -> None:
+    """Remove a folder's files matching pattern, and the temporary files a killed writer left: what is
+    written there next replaces them all (no mix of an old and a new run)."""
+    if folder.is_dir():
+        for path in folder.iterdir():
+            if path.is_file() and (path.match(pattern) or is_temporary(path)):
+                path.unlink()
+
+
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
     """Write bytes to `path` atomically."""
     with atomic_path(path) as tmp:

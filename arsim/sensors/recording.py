@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 from arsim import __version__
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.errors import ArsimError
-from arsim.core.files import atomic_path, write_text_atomic
+from arsim.core.files import atomic_path, clear_files, is_temporary, write_text_atomic
 from arsim.core.png import png_bytes
 from arsim.scenario import Scenario, scenario_to_toml
 from arsim.scenario.environment import load_environment
@@ -118,6 +118,7 @@ def _write_burst(out_dir: Path, camera: CameraRenderer, views: Rotation, scenari
         tried = [(v, _burst_settings(camera, v, scenario, response)) for v in views[1:]]
         view, settings = max(reversed(tried), key=lambda t: upper(*t))  # (the last of equals)
     (out_dir / "burst").mkdir(exist_ok=True)
+    clear_files(out_dir / "burst", "*.png")  # an earlier recording's burst, a killed writer's temp file
     rows = []
     for k, (exposure, iso) in enumerate(settings):
         frame = camera.capture(view, exposure, iso, noise_key(scenario.run.seed, "burst", k))
@@ -199,6 +200,7 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     """Write one segment's files; returns the fused yaw error at its end (degrees)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "frames").mkdir(exist_ok=True)
+    clear_files(out_dir / "frames", "*.png")  # an earlier recording's frames, a killed writer's temp file
     trajectory = segment.trajectory
     camera = camera_intrinsics(scenario)
     cam = scenario.device.camera
@@ -468,7 +470,7 @@ def load_recording(folder: Path) -> Recording:
     missing = [name for name in listed if not (folder / name).exists()]
     if missing:
         raise ArsimError(f"{path}: {len(missing)} listed frames are missing, first {missing[0]}; record again or drop them from frames.csv")
-    extra = sorted({f"frames/{p.name}" for p in (folder / "frames").glob("*.png")} - set(listed))
+    extra = sorted({f"frames/{p.name}" for p in (folder / "frames").glob("*.png") if not is_temporary(p)} - set(listed))
     if extra:
         raise ArsimError(f"{folder / 'frames'}: {len(extra)} frames are not in frames.csv, first {extra[0]}; remove them or list them")
     frames = [{"t_ns": int(n[0]), "exposure_ns": int(n[1]), "iso": float(n[2]), "file": f} for n, f in zip(numbers, listed)]
