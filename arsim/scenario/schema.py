@@ -104,6 +104,8 @@ def _coerce_scalar(tp: Any, value: Any) -> Any:
             return value
     elif tp is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if isinstance(value, int) and abs(value) > 1e308:
+                raise TypeError  # an integer no float holds (400 digits): not a number arsim can take
             if not math.isfinite(value):
                 raise TypeError
             return float(value)
