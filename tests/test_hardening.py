@@ -66,3 +66,21 @@ def test_mc_memory_is_bounded_by_the_chunk_not_the_sample_count():
         tracemalloc.stop()
     assert np.isfinite(maps).all() and maps.max() > 0
     assert peak < 1.5 * CHUNK_SAMPLES * BYTES_PER_SAMPLE, peak
+
+
+@pytest.mark.parametrize("toml, fragment", [
+    ("[device.camera]\nexposure_min_s = 0.02\nexposure_max_s = 0.01\n", "exposure_min_s = 0.02 is above exposure_max_s"),
+    ("[device.camera]\niso_min = 800\niso_max = 100\n", "iso_min = 800 is above iso_max = 100"),
+    ("[ar]\nnear_m = 2.0\nfar_m = 1.0\n", "far_m = 1.0 is below near_m = 2.0"),
+    ("[[ar.look_away]]\nstart_s = 5.0\nend_s = 4.0\n", "start_s = 5.0 is not before end_s = 4.0"),
+    ('[[render.objects]]\nkind = "mesh"\n', 'kind = "mesh" needs mesh'),
+    ('[environment]\nmap = "envmaps"\n', "a folder, not a file"),
+    ('[environment]\nmap = "~nosuchuser/x.exr"\n', "is not a usable path"),
+    ('[environment]\nmap = "a\\u0000b.exr"\n', "is not a usable path"),
+    ('[environment]\nmap = "' + "a" * 300 + '.exr"\n', "is not a usable path"),
+    ("[run]\nseed = " + "1" * 400 + "\n", "out of range"),
+])
+def test_validate_refuses_what_a_later_stage_would(tmp_path, toml, fragment):
+    # each of these passed `validate` and failed later (or crashed) before the rules moved into the schema
+    (tmp_path / "s.toml").write_text(toml)
+    assert_one_line_error(arsim("validate", tmp_path / "s.toml"), fragment)
