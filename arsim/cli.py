@@ -802,7 +802,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.run(args)
     except ArsimError as exc:
-        print(f"arsim {args.command}: error: {exc}", file=sys.stderr)
+        print(f"arsim {args.command}: error: " + " ".join(str(exc).splitlines()), file=sys.stderr)  # one line, always
         return 2
     except OSError as exc:  # the disk full, a folder made read-only mid-run: one line naming the path
         where = f"{exc.filename}: " if exc.filename else ""

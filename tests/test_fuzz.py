@@ -58,3 +58,25 @@ def test_regression_an_integer_no_float_holds_for_a_number_key():
     # found by test_a_fuzzed_scenario_loads_or_is_refused_in_one_line: OverflowError escaped
     with pytest.raises(ArsimError, match=r"\[profile\] budget_ms .* wrong type"):
         parse_scenario("[profile]\nbudget_ms = " + "2" * 330 + "\n", "fuzz.toml")
+
+
+def test_regression_a_path_with_control_characters_is_refused_on_one_line():
+    # found by benchmarks/fuzz.py: a newline inside a path made a refusal of many lines
+    with pytest.raises(ArsimError) as info:
+        parse_scenario('[environment]\nmap = "a\\nb\\fc.exr"\n', "fuzz.toml")
+    assert "\n" not in str(info.value) and "a\\nb\\x0cc.exr" in str(info.value)
+
+
+def test_regression_a_huge_integer_in_meta_json_is_refused(tmp_path):
+    # found by benchmarks/fuzz.py: OverflowError escaped the meta.json checks
+    import json
+
+    from arsim.sensors.recording import check_meta
+
+    meta = {"format": "arsim-recording/1", "seed": 0, "duration_s": 10 ** 400}
+    with pytest.raises(ArsimError, match="duration_s is not a positive number"):
+        check_meta(json.loads(json.dumps(meta)), tmp_path / "meta.json")
+    meta |= {"duration_s": 1.0, "camera": {"width": 8, "height": 8, "fx": 1, "fy": 1, "cx": 4, "cy": 4, "k1": 0, "k2": 0,
+                                           "fps": 30}, "camera_to_device": [[10 ** 400, 0, 0], [0, 1, 0], [0, 0, 1]]}
+    with pytest.raises(ArsimError, match="camera_to_device is not a 3 x 3 rotation matrix"):
+        check_meta(meta, tmp_path / "meta.json")

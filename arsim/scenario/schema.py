@@ -74,9 +74,14 @@ class PathResolver:
         return next((c for c in candidates if c.exists()), candidates[0]), candidates
 
 
+def _printable(text: str) -> str:
+    """text with its control characters escaped: an error naming it stays one line."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 def _describe(value: Any) -> str:
     if isinstance(value, str):
-        return f'"{value}"'
+        return f'"{_printable(value)}"'
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, dict):
@@ -230,9 +235,9 @@ def parse_section(cls: type, table: Any, source: str, resolver: PathResolver, pa
                 resolved, candidates = resolver.resolve(value)
                 found = resolved.is_file()
             except (RuntimeError, ValueError, OSError) as exc:  # ~nosuchuser, a NUL byte, a name too long
-                raise ScenarioError(f"{where} {name} = {_describe(raw)[:80]}: is not a usable path ({exc}); fix the path") from None
+                raise ScenarioError(f"{where} {name} = {_describe(raw)[:80]}: is not a usable path ({_printable(str(exc))}); fix the path") from None
             if f.metadata["must_exist"] and not found:
-                looked = " or ".join(str(c) for c in candidates)
+                looked = _printable(" or ".join(str(c) for c in candidates))
                 what = "a folder, not a file" if resolved.is_dir() else "no such file"
                 raise ScenarioError(f"{where} {name} = {_describe(raw)[:80]}: {what} (looked for {looked[:300]}); fix the path")
             value = resolved

@@ -327,7 +327,7 @@ _NUMBER = (int, float)
 META_SCHEMA = {
     "format": (str, lambda v: v == FORMAT, f"{FORMAT}"),
     "seed": (int, lambda v: v >= 0, "an integer from 0"),
-    "duration_s": (_NUMBER, lambda v: math.isfinite(v) and v > 0, "a positive number of seconds"),
+    "duration_s": (_NUMBER, lambda v: 0 < v < 1e9, "a positive number of seconds"),
     "camera": (dict, lambda v: _camera_problem(v) is None, "the camera (width, height, fx, fy, cx, cy, k1, k2, fps)"),
     "camera_to_device": (list, lambda v: _rotation_problem(v) is None, "a 3 x 3 rotation matrix"),
     "fusion": (str, lambda v: True, "the fusion's name"),
@@ -350,7 +350,7 @@ def _camera_problem(cam: dict) -> str | None:
 def _rotation_problem(m: list) -> str | None:
     try:
         a = np.array(m, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         return "not a matrix of numbers"
     if a.shape != (3, 3) or not np.isfinite(a).all() or not np.allclose(a @ a.T, np.eye(3), atol=1e-6):
         return "not a 3 x 3 rotation"
