@@ -417,7 +417,7 @@ def _check_frame_header(path: Path, width: int, height: int) -> None:
         raise ArsimError(f"{path}: is {w} x {h}, the camera's frames are {width} x {height}; record again")
 
 
-def _rotations(path: Path, t_ns: np.ndarray, q: np.ndarray, what: str) -> Rotation:
+def _rotations(path: Path, q: np.ndarray, what: str) -> Rotation:
     """Quaternions (K, 4) as rotations: at least two (they are interpolated), none of zero length."""
     if len(q) < 2:
         raise ArsimError(f"{path}: holds {len(q)} {what}, need at least 2; record again")
@@ -504,9 +504,9 @@ def load_recording(folder: Path) -> Recording:
     path = folder / "orientation.csv"
     values = _numbers(path, _read_csv(path, ["t_ns", "qx", "qy", "qz", "qw"]), slice(0, 5))
     _increasing(path, values[:, 0].astype(np.int64), "orientations")
-    orientation = (values[:, 0].astype(np.int64), _rotations(path, values[:, 0], values[:, 1:], "orientations"))
+    orientation = (values[:, 0].astype(np.int64), _rotations(path, values[:, 1:], "orientations"))
     path = folder / "groundtruth.csv"
     values = _numbers(path, _read_csv(path, ["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"]), slice(0, 8))
     _increasing(path, values[:, 0].astype(np.int64), "ground-truth poses")
-    groundtruth = (values[:, 0].astype(np.int64), values[:, 1:4], _rotations(path, values[:, 0], values[:, 4:], "ground-truth poses"))
+    groundtruth = (values[:, 0].astype(np.int64), values[:, 1:4], _rotations(path, values[:, 4:], "ground-truth poses"))
     return Recording(folder, meta, frames, burst, imu, orientation, groundtruth)
