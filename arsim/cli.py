@@ -7,7 +7,6 @@ import contextlib
 import json
 import math
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,7 @@ from arsim import __version__
 from arsim.core.assets import bundled_scenarios
 from arsim.core.conventions import is_map_size
 from arsim.core.errors import ArsimError
-from arsim.core.files import json_text
+from arsim.core.files import check_output_folder, json_text, staged_folder
 from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
 from arsim.core.image_stats import image_stats
 from arsim.core.progress import progress_bar
@@ -27,6 +26,7 @@ from arsim.lighting.accurate import MAX_EXPONENT
 from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
+from arsim.scenario.loader import scenario_path
 from arsim.sensors.recording import load_recording, recording_segments
 
 MAX_SIZE = 16384
@@ -64,6 +64,15 @@ def _size(text: str) -> int:
     if not 1 <= value <= MAX_SIZE:
         raise argparse.ArgumentTypeError(f"size {value} is out of range: give 1 to {MAX_SIZE}")
     return value
+
+
+def _path(text: str) -> Path:
+    """An argparse type: a path, refused when the OS could not take it (a NUL byte, an empty string)."""
+    if "\x00" in text:
+        raise argparse.ArgumentTypeError(f"path {text!r} holds a NUL byte; give a path without one")
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path; give a file or folder")
+    return Path(text)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -164,8 +173,9 @@ def cmd_record(args: argparse.Namespace) -> int:
 
     scenario = load_scenario(args.scenario)
     recording_segments(scenario)  # settings that do not fit together stop here, before any output
-    out = _output_dir(args.output)
-    r = recorded(scenario, out, _bar)
+    with _output(args, _scenario_file(args.scenario)) as work:
+        r = recorded(scenario, work, _bar)
+    out = args.output
     ar = (f"; AR path: {r.summary.ar_frames} frames in {out / 'ar'}, the tag in view in {100 * r.tag_in_view:.1f} % of them"
           if r.tag_in_view is not None else "")
     print(f"wrote {r.summary.frames} frames and the IMU streams of a {r.summary.duration_s:.0f} s sweep to {out}; "
@@ -185,14 +195,15 @@ def cmd_capture(args: argparse.Namespace) -> int:
     source = args.source
     if source is not None and source.is_dir():
         rec = load_recording(source)
-        out = _output_dir(args.output)
         settings = CaptureSettings.of(recording_scenario(rec), args.size, args.align_every)
-        _, metrics = measured_capture(rec, settings, out, _bar)
+        with _output(args, source) as work:
+            _, metrics = measured_capture(rec, settings, work, _bar)
     else:
         scenario = load_scenario(source)
         recording_segments(scenario)  # settings that do not fit together stop here, before any output
-        out = _output_dir(args.output)
-        _, metrics = captured_sweep(scenario, out, args.size, args.align_every, _bar)
+        with _output(args, _scenario_file(source)) as work:
+            _, metrics = captured_sweep(scenario, work, args.size, args.align_every, _bar)
+    out = args.output
     for warning in metrics["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"captured {metrics['frames']} frames at {metrics['frames_per_second']:.1f} frames/s into {out / 'env.exr'}: "
@@ -240,8 +251,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay,
                                flip_every=r.flip_every)
     source = str(args.env) if args.env is not None else ", ".join(map(str, args.maps)) if args.maps else "captured"
-    out = _output_dir(args.output)
-    metrics = render_session(scenario, out, settings, map_size, probe, maps, source, _bar, objects)
+    with _output(args, _scenario_file(args.scenario), args.env, *(args.maps or ())) as work:
+        metrics = render_session(scenario, work, settings, map_size, probe, maps, source, _bar, objects)
+    out = args.output
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: {_tracking_p95(metrics)}; "
           f"FLIP against the truth frame {metrics['flip_mean']:.4f}; metrics in {out / 'metrics.json'}")
     return 0
@@ -286,8 +298,9 @@ def cmd_profile(args: argparse.Namespace) -> int:
         b.check(map_size)  # a tile that does not divide the maps fails here, before any work
     objects = scene_objects(r)
     probe = _probe(args.env, map_size) if args.env is not None else None  # read early: a bad file fails first
-    out = _output_dir(args.output)
-    runs = profile_session(scenario, out, bakes, budget, args.max_frames or pr.max_frames, map_size, probe, _bar, objects)
+    with _output(args, _scenario_file(args.scenario), args.env) as work:
+        runs = profile_session(scenario, work, bakes, budget, args.max_frames or pr.max_frames, map_size, probe, _bar, objects)
+    out = args.output
     for run in runs:
         s = run.summary()
         bake = s["bake"]
@@ -420,27 +433,29 @@ def _tracking_p95(m: dict) -> str:
     return f"tracking p95 {rot:.2f} degrees, {pct:.2f} % of the distance"
 
 
-def _output_dir(path: Path) -> Path:
-    """-o's folder, created if missing and known writable before any work is done."""
-    if path.exists() and not path.is_dir():
-        raise ArsimError(f"{path}: exists and is not a folder; give a folder for -o")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path):
-            pass
-    except OSError as exc:
-        raise ArsimError(f"{path}: cannot write there ({exc.strerror or exc}); give a folder you can write to for -o") from None
-    return path
+def _scenario_file(path: Path | None) -> Path | None:
+    """The file a scenario argument names (a bundled name resolved), for the check that -o holds no input."""
+    return scenario_path(path) if path is not None else None
+
+
+@contextlib.contextmanager
+def _output(args: argparse.Namespace, *inputs: Path | None):
+    """-o's folder, checked before any work (core/files.check_output_folder); yields the temporary folder
+    the command writes into, which becomes -o whole when the command succeeds."""
+    check_output_folder(args.output, args.force, inputs)
+    with staged_folder(args.output, args.command) as work:
+        yield work
 
 
 def cmd_bake(args: argparse.Namespace) -> int:
     params = _parameters(args)
     params.check()  # before any work or output
     env = _probe(args.env, args.size)
-    out = _output_dir(args.output)
-    with progress_bar(f"baking {len(args.spec)} maps ({args.method})", len(args.spec)) as update:
-        result = bake(env, args.spec, args.method, params, progress=lambda k: update(completed=k))
-    write_bake(out, args.spec, args.method, params, result, str(args.env))
+    with _output(args, args.env) as work:
+        with progress_bar(f"baking {len(args.spec)} maps ({args.method})", len(args.spec)) as update:
+            result = bake(env, args.spec, args.method, params, progress=lambda k: update(completed=k))
+        write_bake(work, args.spec, args.method, params, result, str(args.env))
+    out = args.output
     print(f"wrote {len(args.spec)} maps ({args.method}, {env.shape[0]}² angle maps) to {out} in {result.seconds_total:.2f} s")
     return 0
 
@@ -448,7 +463,6 @@ def cmd_bake(args: argparse.Namespace) -> int:
 def cmd_compare_methods(args: argparse.Namespace) -> int:
     check_request(args.methods, _parameters(args), args.sh_orders)  # before any work or output
     env = _probe(args.env, args.size)
-    out = _output_dir(args.output)
     stages = 0
 
     def on_stage(stage: str) -> None:
@@ -456,10 +470,11 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
         update(completed=stages, description=stage)
         stages += 1
 
-    with progress_bar("comparing methods", len(args.methods) + 3) as update:
-        comparison = compare(env, args.spec, args.methods, _parameters(args), args.reference_texels,
-                             args.sh_orders, progress=on_stage)
-    paths = write_comparison(comparison, out)
+    with _output(args, args.env) as work:
+        with progress_bar("comparing methods", len(args.methods) + 3) as update:
+            comparison = compare(env, args.spec, args.methods, _parameters(args), args.reference_texels,
+                                 args.sh_orders, progress=on_stage)
+        paths = [args.output / p.relative_to(work) for p in write_comparison(comparison, work)]
     for name, errors in comparison.errors.items():
         worst_mean = max(e["mean"] for e in errors)
         worst_max = max(e["max"] for e in errors)
@@ -480,13 +495,13 @@ def cmd_bases_compare(args: argparse.Namespace) -> int:
     if not 0.0 <= args.sun_elevation <= 90.0:
         raise ArsimError(f"--sun-elevation {args.sun_elevation:g} is not an elevation: give 0 to 90 degrees")
     environment = visual_environment(args.env)  # a file that cannot be read fails here, before any output
-    out = _output_dir(args.output)
-    with progress_bar("comparing bases", args.signals) as update:
-        study = bases_study(out, args.signals, args.seed, selected, environment, args.sun_elevation, args.sun_share,
+    with _output(args, args.env) as work, progress_bar("comparing bases", args.signals) as update:
+        study = bases_study(work, args.signals, args.seed, selected, environment, args.sun_elevation, args.sun_share,
                             progress=lambda k: update(completed=k))
+        paths = [args.output / p.relative_to(work) for p in study.paths]
     for key, stats in study.errors.items():
         print(f"{key:<14} mean error {100 * stats['mean']:8.3f} %   visual {100 * study.visual_errors[key]:7.3f} %")
-    print("wrote " + ", ".join(str(p) for p in study.paths))
+    print("wrote " + ", ".join(str(p) for p in paths))
     return 0
 
 
@@ -505,17 +520,20 @@ def cmd_run(args: argparse.Namespace) -> int:
         frames_of(args.baseline)  # a baseline without frames fails here, before any work
     if args.recording is not None and not args.recording.is_dir():
         raise ArsimError(f"{args.recording}: no such recording folder; make one with `arsim record SCENARIO -o REC`")
-    out = _output_dir(args.output)
     source = str(args.scenario) if args.scenario is not None else "the embedded default scenario"
 
-    manifest = run_scenario(scenario, source, out, args.recording, _bar)
+    result = None
+    with _output(args, _scenario_file(args.scenario), args.recording, args.baseline) as work:
+        manifest = run_scenario(scenario, source, work, args.recording, _bar)
+        if args.baseline is not None and not args.update_baseline:
+            result = run_diff(args.baseline, work, work / "diff", args.max_flip)
+    out = args.output
     s = manifest["metrics"]["session"]
     print(f"run {scenario.run.name} in {out}: {s['frames_total']} frames ({s['frames_lost']} with the tag lost), "
           f"{_tracking_p95(s)}, FLIP against the truth frame {s['flip_mean']:.4f}; report {out / 'report' / 'index.html'}")
     if args.update_baseline:
         print(f"baseline written: {update_baseline(out, args.baseline)}")
-    elif args.baseline is not None:
-        result = run_diff(args.baseline, out, out / "diff", args.max_flip)
+    elif result is not None:
         print(f"against the baseline {args.baseline}: {'passed' if result.passed else 'FAILED'}: {result.message()}; "
               f"page {out / 'diff' / 'index.html'}")
         return 0 if result.passed else 1
@@ -529,15 +547,16 @@ def cmd_batch(args: argparse.Namespace) -> int:
         load_scenario(path)  # a scenario that does not parse fails here, before any run
     if args.ray is not None:
         check_ray_address(args.ray)
-    out = _output_dir(args.output)
-    with progress_bar(f"running {len(args.scenarios)} scenarios", len(args.scenarios)) as update:
-        finished = []
+    finished = []
 
-        def done(result):
-            finished.append(result)
-            update(completed=len(finished), description=f"running scenarios: {Path(result['scenario']).stem} done")
+    def done(result):
+        finished.append(result)
+        update(completed=len(finished), description=f"running scenarios: {Path(result['scenario']).stem} done")
 
-        summary = run_batch(args.scenarios, out, args.workers, args.ray, args.baselines, args.max_flip, done)
+    with (_output(args, *map(scenario_path, args.scenarios), args.baselines) as work,
+          progress_bar(f"running {len(args.scenarios)} scenarios", len(args.scenarios)) as update):
+        summary = run_batch(args.scenarios, work, args.workers, args.ray, args.baselines, args.max_flip, done)
+    out = args.output
     for s in summary["scenarios"]:
         if not s["ok"]:
             print(f"arsim batch: {s['name']} failed: {s['error']}", file=sys.stderr)
@@ -550,9 +569,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
 def cmd_diff(args: argparse.Namespace) -> int:
     from arsim.evaluate.diff import run_diff
 
-    out = _output_dir(args.output) if args.output is not None else None
-    with progress_bar("comparing frames", 1.0) as update:
-        result = run_diff(args.a, args.b, out, args.max_flip, progress=lambda f: update(completed=f))
+    with (_output(args, args.a, args.b) if args.output is not None else contextlib.nullcontext()) as work, \
+            progress_bar("comparing frames", 1.0) as update:
+        result = run_diff(args.a, args.b, work, args.max_flip, progress=lambda f: update(completed=f))
+    out = args.output
     summary = result.summary()
     where = f"; page {out / 'index.html'}" if out is not None else ""
     print(f"{'passed' if result.passed else 'FAILED'}: {result.message()}\n"
@@ -561,7 +581,13 @@ def cmd_diff(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
+    from arsim.render.content import scene_objects
+    from arsim.scenario.environment import read_environment
+
     scenario = load_scenario(args.scenario)
+    recording_segments(scenario)
+    read_environment(scenario.environment)  # a PNG renamed .exr, a truncated file, NaN texels: refused as record would
+    scene_objects(scenario.render)  # a mesh that cannot be read: refused as render would
     print(f"# {args.scenario or DEFAULT_SCENARIO}: valid; as resolved:")
     print(scenario_to_toml(scenario), end="")
     return 0
@@ -578,7 +604,7 @@ def _info_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "info", "print size, layout, radiance range and bad-texel counts of an HDR image, "
                  "or check a recording or a run directory (every file its manifest lists) and summarise it",
                  "arsim info assets/envmaps/sunrise.exr   (or: arsim info rec, arsim info run)")
-    p.add_argument("file", type=Path, metavar="FILE",
+    p.add_argument("file", type=_path, metavar="FILE",
                    help="OpenEXR (.exr) or Radiance (.hdr) image, a recording folder or a run directory")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(run=cmd_info)
@@ -587,8 +613,8 @@ def _info_parser(sub: argparse._SubParsersAction) -> None:
 def _convert_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "convert", "convert an HDR image between layouts, sizes and formats (.exr, .hdr, .png preview)",
                  "arsim convert assets/envmaps/city.exr city_anglemap.exr --layout anglemap --size 512")
-    p.add_argument("input", type=Path, metavar="IN", help="OpenEXR (.exr) or Radiance (.hdr) image, equirect 2:1 or angle map 1:1")
-    p.add_argument("output", type=Path, metavar="OUT", help=".exr (float32 RGB), .hdr, or .png (tone-mapped 8-bit preview)")
+    p.add_argument("input", type=_path, metavar="IN", help="OpenEXR (.exr) or Radiance (.hdr) image, equirect 2:1 or angle map 1:1")
+    p.add_argument("output", type=_path, metavar="OUT", help=".exr (float32 RGB), .hdr, or .png (tone-mapped 8-bit preview)")
     p.add_argument("--layout", choices=LAYOUTS, help="layout of OUT (default: that of IN)")
     p.add_argument("--size", type=_size, metavar="N",
                    help="N of an N x N angle map, or the height N of a 2N x N equirect (default: the height of IN)")
@@ -597,10 +623,18 @@ def _convert_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=cmd_convert)
 
 
+def _output_option(p: argparse.ArgumentParser, what: str, required: bool = True) -> None:
+    """-o and --force, the same for every command that writes a folder (the policy: core/files.check_output_folder)."""
+    p.add_argument("-o", "--output", type=_path, required=required, metavar="DIR",
+                   help=f"{what}; written whole when the command succeeds, replacing an earlier arsim output there")
+    p.add_argument("--force", action="store_true",
+                   help="replace DIR even if it holds files arsim did not write (they are deleted)")
+
+
 def _map_options(p: argparse.ArgumentParser) -> None:
     """What bake and compare-methods share: the environment, the output folder, the maps and their parameters."""
-    p.add_argument("env", type=Path, metavar="ENV", help="HDR environment, equirect 2:1 or angle map 1:1 (.exr or .hdr)")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("env", type=_path, metavar="ENV", help="HDR environment, equirect 2:1 or angle map 1:1 (.exr or .hdr)")
+    _output_option(p, "output folder")
     p.add_argument("--size", type=_map_size, metavar="N",
                    help="N of the N x N angle maps, a power of two from 8 (default: an angle map's own size, else 512)")
     p.add_argument("--spec", type=_exponents, default=list(DEFAULT_EXPONENTS), metavar="S,S,...",
@@ -632,13 +666,13 @@ def _bases_parser(sub: argparse._SubParsersAction) -> None:
                  "irradiance signals (bases.md, bases.json, bases.png) and a normal-mapped plane under one environment "
                  "with a grazing sun, a tile per basis (visual.png, visual_errors.png)",
                  "arsim bases compare -o bases --signals 200   (or: --bases h6,modh6,sh9,hsh9 --env assets/envmaps/sunrise.exr)")
-    q.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    _output_option(q, "output folder")
     q.add_argument("--signals", type=_positive("--signals"), default=100, metavar="N",
                    help="random irradiance signals to average over (default 100)")
     q.add_argument("--seed", type=_non_negative("--seed"), default=0, help="the first signal's seed, 0 or more (default 0)")
     q.add_argument("--bases", type=lambda t: [b.strip() for b in t.split(",") if b.strip()], metavar="B,B,...",
                    help="bases with their counts, e.g. sh9,hl2,h4,h6,modh6,hsh9,makhotkin9,zernike6,sh-rh9 (default: all)")
-    q.add_argument("--env", type=Path, metavar="ENV.exr", help="the visual comparison's environment (default: assets' interior.exr)")
+    q.add_argument("--env", type=_path, metavar="ENV.exr", help="the visual comparison's environment (default: assets' interior.exr)")
     q.add_argument("--sun-elevation", type=float, default=8.0, metavar="DEG",
                    help="the visual comparison's sun elevation in degrees (default 8: grazing)")
     q.add_argument("--sun-share", type=_positive("--sun-share", float), default=3.0, metavar="X",
@@ -664,8 +698,8 @@ def _record_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "record", "synthesise the capture sweep of a scenario (frames, IMU streams, fused orientation, truth) and, "
                  "unless [ar] enabled = false, the AR path around the table and tag into DIR/ar",
                  "arsim record scenarios/indoor.toml -o rec")
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="recording folder (created if missing)")
+    p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
+    _output_option(p, "recording folder")
     p.set_defaults(run=cmd_record)
 
 
@@ -673,9 +707,9 @@ def _capture_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "capture", "stitch a recording's frames into an HDR angle-map light probe, correcting the IMU's drift "
                  "by feature alignment, and measure it against the truth (records the scenario's sweep first if given one)",
                  "arsim capture rec -o capture   (or: arsim capture scenarios/indoor.toml -o capture)")
-    p.add_argument("source", type=Path, nargs="?", metavar="SCENARIO|RECORDING",
+    p.add_argument("source", type=_path, nargs="?", metavar="SCENARIO|RECORDING",
                    help="a recording folder, or a scenario (.toml or a bundled name) to record first; default: the embedded default scenario")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
+    _output_option(p, "output folder")
     p.add_argument("--size", type=_map_size, metavar="N", help="N of the captured N x N angle map (default: [capture] capture_size, 512)")
     p.add_argument("--align-every", type=_positive("--align-every"), metavar="K",
                    help="align every K-th metered frame against the probe (default: [capture] align_every, 1)")
@@ -684,10 +718,10 @@ def _capture_parser(sub: argparse._SubParsersAction) -> None:
 
 def _session_options(p: argparse.ArgumentParser, env_help: str) -> None:
     """What render and profile share: the scenario, the output folder, the light's file, the maps' size."""
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO",
+    p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO",
                    help=SCENARIO_HELP)
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created if missing)")
-    p.add_argument("--env", type=Path, metavar="PROBE.exr", help=env_help)
+    _output_option(p, "output folder")
+    p.add_argument("--env", type=_path, metavar="PROBE.exr", help=env_help)
     p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
 
 
@@ -697,7 +731,7 @@ def _render_parser(sub: argparse._SubParsersAction) -> None:
                  "frame with the truth frame (the objects lit by the true environment's maps) by FLIP",
                  "arsim render -o session   (or: arsim render scenarios/indoor.toml -o session --env probe.exr --method sh)")
     _session_options(p, "light the objects with this environment instead of the captured probe")
-    p.add_argument("--maps", type=Path, nargs="+", metavar="DIR",
+    p.add_argument("--maps", type=_path, nargs="+", metavar="DIR",
                    help="light the objects with maps baked before (`arsim bake` folders, one per method) instead of the captured probe")
     p.add_argument("--method", choices=sorted(METHODS),
                    help="map method of the objects that name none (default: [render] method, fast)")
@@ -733,10 +767,10 @@ def _run_parser(sub: argparse._SubParsersAction) -> None:
                  "every method it names, run the AR session, evaluate every stage, and write the run directory with "
                  "manifest.json and report/index.html; --baseline compares the frames with a baseline's",
                  "arsim run -o run   (or: arsim run scenarios/indoor.toml -o run --baseline baselines/indoor)")
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="run directory (created if missing)")
-    p.add_argument("--recording", type=Path, metavar="REC", help="replay this recording (`arsim record`) instead of recording anew")
-    p.add_argument("--baseline", type=Path, metavar="DIR", help="compare the run's frames with this baseline (a run directory)")
+    p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
+    _output_option(p, "run directory")
+    p.add_argument("--recording", type=_path, metavar="REC", help="replay this recording (`arsim record`) instead of recording anew")
+    p.add_argument("--baseline", type=_path, metavar="DIR", help="compare the run's frames with this baseline (a run directory)")
     p.add_argument("--update-baseline", action="store_true", help="write the run's frames as the baseline DIR instead of comparing")
     p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"with --baseline: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
@@ -747,11 +781,11 @@ def _batch_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "batch", "run many scenarios end to end in parallel processes (or as tasks on a Ray cluster) and write "
                  "one summary of all their metrics and regressions (summary.md, summary.html, summary.json)",
                  "arsim batch scenarios/*.toml -o batch --workers 2   (or: ... --ray auto, --baselines baselines)")
-    p.add_argument("scenarios", type=Path, nargs="+", metavar="SCENARIO", help="scenario .toml files, or bundled scenarios' names")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="batch folder: a run directory per scenario")
+    p.add_argument("scenarios", type=_path, nargs="+", metavar="SCENARIO", help="scenario .toml files, or bundled scenarios' names")
+    _output_option(p, "batch folder: a run directory per scenario")
     p.add_argument("--workers", type=_positive("--workers"), default=1, metavar="N", help="runs at once on this machine (default 1)")
     p.add_argument("--ray", metavar="ADDRESS", help="run each scenario as a task on the Ray cluster at ADDRESS (host:port, or auto)")
-    p.add_argument("--baselines", type=Path, metavar="DIR", help="compare each run's frames with DIR/<scenario name>")
+    p.add_argument("--baselines", type=_path, metavar="DIR", help="compare each run's frames with DIR/<scenario name>")
     p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"with --baselines: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
     p.set_defaults(run=cmd_batch)
@@ -762,9 +796,9 @@ def _diff_parser(sub: argparse._SubParsersAction) -> None:
                  "by FLIP (mean and 99th percentile), PSNR and the largest difference; writes a heatmap per frame that "
                  "differs and an HTML page; exit status 1 when a frame's mean FLIP exceeds --max-flip",
                  "arsim diff baseline run -o diff --max-flip 0.001   (or: arsim diff a.png b.png)")
-    p.add_argument("a", type=Path, metavar="A", help="the reference: an image, a run directory or a folder of frames")
-    p.add_argument("b", type=Path, metavar="B", help="what is compared with it (the same kind as A)")
-    p.add_argument("-o", "--output", type=Path, metavar="DIR", help="write heatmaps/, diff.json and index.html here")
+    p.add_argument("a", type=_path, metavar="A", help="the reference: an image, a run directory or a folder of frames")
+    p.add_argument("b", type=_path, metavar="B", help="what is compared with it (the same kind as A)")
+    _output_option(p, "write heatmaps/, diff.json and index.html into this folder", required=False)
     p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g}: any difference fails)")
     p.set_defaults(run=cmd_diff)
@@ -773,7 +807,7 @@ def _diff_parser(sub: argparse._SubParsersAction) -> None:
 def _validate_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "validate", "check a scenario file and print it as resolved (defaults filled in, paths found)",
                  "arsim validate scenarios/indoor.toml")
-    p.add_argument("scenario", type=Path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
+    p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
     p.set_defaults(run=cmd_validate)
 
 

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from arsim.core.files import OUTPUT_MARK
 from arsim.core.hdr_io import read_hdr, write_exr
 from tests.conftest import ENVMAPS
 from tests.test_cli import arsim, assert_one_line_error
@@ -21,7 +22,7 @@ def probe32(tmp_path_factory):
 def test_bake_writes_the_maps_and_bake_json(tmp_path, probe32):
     r = arsim("bake", probe32, "-o", tmp_path / "maps", "--method", "fast", "--spec", "1,10,80,2.5")
     assert r.returncode == 0, r.stderr
-    names = sorted(p.name for p in (tmp_path / "maps").iterdir())
+    names = sorted(p.name for p in (tmp_path / "maps").iterdir() if p.name != OUTPUT_MARK)
     assert names == ["bake.json", "irradiance.exr", "reflection_s10.exr", "reflection_s2.5.exr", "reflection_s80.exr"]
     record = json.loads((tmp_path / "maps" / "bake.json").read_text())
     assert record["method"] == "fast" and record["size"] == 32
@@ -47,7 +48,7 @@ def test_compare_methods_writes_tables_and_figures(tmp_path, probe32):
     r = arsim("compare-methods", probe32, "-o", tmp_path, "--spec", "1,20", "--methods", "fast,mipmap,sh",
               "--sh-orders", "3,6")
     assert r.returncode == 0, r.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["methods.png", "sh_order.png", "tables.json", "tables.md"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [OUTPUT_MARK, "methods.png", "sh_order.png", "tables.json", "tables.md"]
     tables = json.loads((tmp_path / "tables.json").read_text())
     assert set(tables["errors_percent"]) == {"fast", "mipmap", "sh"}
     assert tables["errors_percent"]["fast"][0]["mean"] < 0.5

@@ -32,8 +32,10 @@ def test_compare_methods_refuses_sh_orders_out_of_range_before_any_work(tmp_path
 
 def test_an_output_folder_under_a_file_or_unwritable_is_refused_in_one_line(tmp_path):
     (tmp_path / "afile").write_text("x")
-    assert_one_line_error(arsim("bake", ENV, "-o", tmp_path / "afile" / "maps", "--size", "16"), "cannot write there")
-    assert_one_line_error(arsim("bake", ENV, "-o", "/proc/arsim-maps", "--size", "16"), "/proc/arsim-maps", "cannot write there")
+    assert_one_line_error(arsim("bake", ENV, "-o", tmp_path / "afile" / "maps", "--size", "16"), "cannot write a folder in")
+    assert_one_line_error(arsim("bake", ENV, "-o", "/proc/arsim-maps", "--size", "16"), "/proc/arsim-maps", "cannot write a folder in")
+    assert_one_line_error(arsim("bake", ENV, "-o", tmp_path / "afile", "--size", "16"), "exists and is not a folder")
+    assert (tmp_path / "afile").read_text() == "x"
 
 
 def test_a_full_disk_while_writing_is_one_line_naming_the_file(tmp_path, monkeypatch, capsys):
@@ -46,6 +48,7 @@ def test_a_full_disk_while_writing_is_one_line_naming_the_file(tmp_path, monkeyp
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(err) == 1
     assert "maps.json: No space left on device" in err[0]
+    assert list(tmp_path.iterdir()) == []  # nothing half-written: no maps folder, no temporary one
 
 
 def test_mc_memory_is_bounded_by_the_chunk_not_the_sample_count():
@@ -84,3 +87,30 @@ def test_validate_refuses_what_a_later_stage_would(tmp_path, toml, fragment):
     # each of these passed `validate` and failed later (or crashed) before the rules moved into the schema
     (tmp_path / "s.toml").write_text(toml)
     assert_one_line_error(arsim("validate", tmp_path / "s.toml"), fragment)
+
+
+@pytest.mark.parametrize("size_line, fragment", [
+    ("-Y 999999999 +X 999999999", "16384 x 8192"),  # cv2.error escaped: larger than OpenCV reads
+    ("-Y 100000 +X 100000", "16384 x 8192"),
+    ("-Y 400 +X 5", "is truncated"),  # 400 scanlines in 64 bytes: refused before a decoder allocates them
+    ("size", "no Radiance resolution line"),
+])
+def test_a_radiance_file_with_an_absurd_size_line_is_refused_in_one_line(tmp_path, size_line, fragment):
+    path = tmp_path / "h.hdr"
+    path.write_bytes(f"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n{size_line}\n".encode() + bytes(range(64)))
+    assert_one_line_error(arsim("info", path), fragment)
+
+
+def test_a_corrupted_frame_is_one_line_without_libpngs_own(tmp_path):
+    # libpng printed "libpng error: IDAT: incorrect data check" on fd 2 before arsim's refusal
+    from tests.fuzzing import prepare_inputs
+
+    rec = prepare_inputs(tmp_path / "in")["rec"]
+    frame = sorted((tmp_path / "in" / "rec" / "frames").glob("*.png"))[3]
+    data = bytearray(frame.read_bytes())
+    data[-20] ^= 0xFF  # inside the last IDAT: its CRC no longer matches
+    frame.write_bytes(bytes(data))
+    assert_one_line_error(arsim("info", rec), frame.name, "fails its CRC")
+    data[-20] ^= 0xFF
+    frame.write_bytes(bytes(data[: len(data) // 2]))
+    assert_one_line_error(arsim("info", rec), frame.name, "is truncated")

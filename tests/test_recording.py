@@ -249,7 +249,7 @@ def test_info_decodes_every_frame(recordings, tmp_path):
     data = (rec / "frames" / "000002.png").read_bytes()
     (rec / "frames" / "000002.png").write_bytes(data[:40])
     load_recording(rec)  # the header alone is read at load
-    assert_one_line_error(arsim("info", rec), "000002.png", "cannot be read")
+    assert_one_line_error(arsim("info", rec), "000002.png", "is truncated")
 
 
 def test_recording_again_over_a_killed_recording_replaces_it(recordings, tmp_path):

@@ -1,4 +1,5 @@
-"""Atomic file writing: a file appears under its final name complete or not at all; strict JSON text."""
+"""Atomic writing: a file appears under its final name complete or not at all, and so does a command's
+output folder (written beside it under a temporary name, then swapped in whole); strict JSON text."""
 
 from __future__ import annotations
 
@@ -6,6 +7,8 @@ import contextlib
 import json
 import math
 import os
+import shutil
+import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -77,3 +80,83 @@ def json_text(value, indent: int | None = 2) -> str:
     """Strict JSON (RFC 8259) of value, a newline at the end: a figure that is not finite (a percentile
     that is infinite, a mean over no frames) is null, as JSON has no NaN or Infinity."""
     return json.dumps(_strict(value), indent=indent, allow_nan=False) + "\n"
+
+
+# The file that marks a folder as an arsim command's output: such a folder is replaced whole by the next
+# command writing there; a folder holding other files is replaced only when asked (--force).
+OUTPUT_MARK = ".arsim-output"
+
+
+def _owner_tag() -> str:
+    """host.pid of this process, in the names of its temporary folders: a later command removes those of
+    a process on this host that is no longer running (one killed before its rename)."""
+    return f"{socket.gethostname()}.{os.getpid()}"
+
+
+def _stale(name: str, prefix: str) -> bool:
+    host, _, rest = name.removeprefix(prefix).partition(".")
+    pid = rest.split(".", 1)[0]
+    if host != socket.gethostname() or not pid.isdigit():
+        return False  # another machine's (a shared file system): it may still be writing
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        return False  # running, as another user
+    return False
+
+
+def check_output_folder(path: Path, force: bool = False, inputs: tuple = ()) -> None:
+    """ArsimError, before any work, unless `path` can take a command's output: a new folder, an empty
+    one, one an arsim command wrote (replaced whole), or any folder with force; never a file, the folder
+    the shell is in (or one above it), or a folder holding one of the command's inputs."""
+    if path.exists() and not path.is_dir():
+        raise ArsimError(f"{path}: exists and is not a folder; give a folder for -o")
+    resolved = path.resolve()
+    cwd = Path.cwd().resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        raise ArsimError(f"{path}: is the folder you are in (or holds it), which the output would replace; "
+                         "give a new folder for -o, e.g. -o out")
+    for source in inputs:
+        if source is not None and (Path(source).resolve() == resolved or resolved in Path(source).resolve().parents):
+            raise ArsimError(f"{path}: holds the input {source}, which the output would replace; give another folder for -o")
+    if path.is_dir() and not force and not (path / OUTPUT_MARK).is_file() and any(path.iterdir()):
+        raise ArsimError(f"{path}: holds files arsim did not write; give a new or empty folder for -o, "
+                         "or pass --force to replace the folder and everything in it")
+
+
+@contextlib.contextmanager
+def staged_folder(path: str | os.PathLike, command: str) -> Iterator[Path]:
+    """Yield a new temporary folder beside `path` to write a command's output into. On success it
+    replaces `path` whole (what was there is removed, so old and new files never mix) and is marked as
+    arsim's output; on failure or interruption it is removed and `path` is left as it was."""
+    path = Path(path)
+    target = path.resolve() if path.is_symlink() else path  # (the folder a link points to is replaced, not the link)
+    parent = target.parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        for kind in ("tmp", "old"):  # left by a command killed before it finished
+            prefix = f".{target.name}.{kind}-"
+            for leftover in parent.glob(prefix + "*"):
+                if leftover.is_dir() and _stale(leftover.name, prefix):
+                    shutil.rmtree(leftover, ignore_errors=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-{_owner_tag()}.", dir=parent))
+    except OSError as exc:
+        raise ArsimError(f"{path}: cannot write a folder in {parent} ({exc.strerror or exc}); "
+                         "give a folder for -o where you can write") from None
+    try:
+        os.chmod(tmp, 0o777 & ~_UMASK)
+        yield tmp
+        (tmp / OUTPUT_MARK).write_text(f"written by arsim {command}; the next command writing here replaces this folder whole\n",
+                                       encoding="utf-8")
+        if target.exists():
+            old = parent / f".{target.name}.old-{_owner_tag()}"
+            shutil.rmtree(old, ignore_errors=True)
+            os.rename(target, old)
+            os.rename(tmp, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.rename(tmp, target)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

@@ -37,6 +37,10 @@ __all__ = [
 HDR_SUFFIXES = (".exr", ".hdr")
 NONFINITE_POLICIES = ("refuse", "zero")
 
+# The largest image read: 16384 x 8192 (a "16k" HDRI), 1.5 GiB as float32 RGB; a header claiming more
+# is refused before the decoder allocates it.
+MAX_PIXELS = 16384 * 8192
+
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
 _RADIANCE_MAGIC = b"#?"
 _LIBC = ctypes.CDLL(None)
@@ -114,7 +118,29 @@ def _read_exr(path: Path) -> np.ndarray:
     return _rgb_from_exr_channels(channels, path)
 
 
+def _radiance_size(path: Path) -> tuple[int, int]:
+    """(height, width) from a Radiance file's resolution line (after the header's blank line), refused in
+    one line when missing, absurd or more than the file's bytes can hold (a scanline takes 4 bytes at least)."""
+    with path.open("rb") as f:
+        head = f.read(65536)
+    end = head.find(b"\n\n")
+    line_end = head.find(b"\n", end + 2) if end >= 0 else -1
+    fields = head[end + 2:line_end].split() if line_end > 0 else []
+    if len(fields) != 4 or fields[0] not in (b"-Y", b"+Y", b"-X", b"+X") or not (fields[1] + fields[3]).isdigit():
+        raise ArsimError(f"{path}: has no Radiance resolution line (such as -Y 512 +X 1024) after its header; re-export it")
+    first, second = int(fields[1]), int(fields[3])
+    height, width = (first, second) if fields[0].endswith(b"Y") else (second, first)
+    if height * width > MAX_PIXELS or height * width == 0:
+        raise ArsimError(f"{path}: its header gives {width} x {height} pixels; arsim reads images of 1 to "
+                         f"{MAX_PIXELS:,} pixels (16384 x 8192): resize it")
+    data_bytes = path.stat().st_size - line_end - 1
+    if data_bytes < 4 * height:
+        raise ArsimError(f"{path}: is truncated ({data_bytes} bytes of pixels for {height} scanlines); re-export it")
+    return height, width
+
+
 def _read_radiance(path: Path) -> np.ndarray:
+    _radiance_size(path)
     with _captured_output():
         bgr = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if bgr is None or bgr.ndim != 3 or bgr.shape[2] < 3:

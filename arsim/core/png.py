@@ -5,8 +5,9 @@ which alone would use a third of a recording's time budget. The PNG container is
 arsim writes it itself and lets ISA-L (isal) do the deflate, at about 4 ms per frame and within a few
 percent of libpng's size. Every row uses the Sub filter, which suits noisy photographs; a compiled
 loop applies it straight from a strided view (such as the RGB of an RGBA read-back), as a copy to
-contiguous RGB alone would cost half as much as the deflate. Files are read back with OpenCV in the
-tests, pixel for pixel.
+contiguous RGB alone would cost half as much as the deflate. Files are read back with OpenCV (pixel
+for pixel in the tests), after a check of their chunks and image data here: libpng prints its own lines
+on standard error for a corrupted file, which would break a refusal's one line.
 """
 
 from __future__ import annotations
@@ -83,9 +84,51 @@ def png_bytes(image: np.ndarray, level: int = 1) -> bytes:
     return b"".join(parts)
 
 
+def png_problem(data: bytes) -> str | None:
+    """What makes PNG file bytes undecodable, in words (None when sound, or not a PNG at all): truncation,
+    a chunk's CRC, image data that does not inflate to the size the header gives. Checked before
+    libpng sees the file; about a third of the decode's time."""
+    if not data.startswith(SIGNATURE):
+        return None
+    view, pos, header, idat = memoryview(data), len(SIGNATURE), None, []
+    while True:
+        if pos + 12 > len(data):
+            return f"is truncated at byte {len(data)} (no IEND chunk)"
+        length, kind = struct.unpack_from(">I4s", data, pos)
+        if pos + 12 + length > len(data):
+            return f"is truncated at byte {len(data)}, inside its {kind.decode('latin-1')!r} chunk"
+        body = view[pos + 8:pos + 8 + length]
+        (crc,) = struct.unpack_from(">I", data, pos + 8 + length)
+        if isal_zlib.crc32(body, isal_zlib.crc32(kind)) & 0xFFFFFFFF != crc:
+            return f"is corrupted: its {kind.decode('latin-1')!r} chunk at byte {pos} fails its CRC"
+        if kind == b"IHDR" and length == 13:
+            header = struct.unpack(">IIBBBBB", body)
+        elif kind == b"IDAT":
+            idat.append(body)
+        elif kind == b"IEND":
+            break
+        pos += 12 + length
+    if header is None:
+        return "has no image header (IHDR)"
+    width, height, depth, colour, _, _, interlaced = header
+    try:
+        pixels = isal_zlib.decompress(b"".join(idat))
+    except isal_zlib.error:
+        return "is corrupted: its image data does not inflate"
+    channels = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}.get(colour)
+    needed = height * ((width * (channels or 0) * depth + 7) // 8 + 1)
+    if not interlaced and len(pixels) != needed:
+        return f"is corrupted: its image data inflates to {len(pixels)} bytes, {width} x {height} needs {needed}"
+    return None
+
+
 def read_frame(path: Path) -> np.ndarray:
     """(H, W, 3) uint8 RGB of an 8-bit image file (a recording's frame, a run's rendered frame)."""
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    data = Path(path).read_bytes()
+    problem = png_problem(data)
+    if problem is not None:
+        raise ArsimError(f"{path}: {problem}; give an intact 8-bit PNG file (a recording's frame: record it again)")
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
     if image is None:
         raise ArsimError(f"{path}: cannot be read as an 8-bit image; give 8-bit PNG files (a recording's frame: "
                          "record it again)")

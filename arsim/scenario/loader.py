@@ -36,8 +36,8 @@ def scenario_path(path: str | os.PathLike) -> Path:
     """The scenario file that path names: the path itself, or where no such file exists and path is a bare
     name (no folder, no suffix), the bundled scenario of that name (`arsim run indoor`)."""
     path = Path(path)
-    if path.exists() or path.suffix or len(path.parts) != 1:
-        return path
+    if path.is_file() or path.suffix or len(path.parts) != 1:
+        return path  # (a bare name that is a folder, such as the output of `arsim run quick -o quick`, is not a scenario)
     return bundled_scenarios().get(path.name, path)
 
 

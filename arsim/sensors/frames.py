@@ -43,10 +43,10 @@ def frame_positions(rec: Recording) -> np.ndarray:
 def check_frame_pixels(rec: Recording, progress=lambda fraction: None) -> int:
     """Decode every frame and burst frame of a recording (load_recording reads only their headers): one
     ArsimError naming the first that cannot be decoded or is not the camera's size; returns the count."""
-    from arsim.core.png import read_frame
-
     import os
     from concurrent.futures import ThreadPoolExecutor
+
+    from arsim.core.png import read_frame
 
     cam = rec.meta["camera"]
     files = [f["file"] for f in rec.frames] + [b["file"] for b in rec.burst]
