@@ -1,9 +1,12 @@
-"""The long fuzz profile: scenarios drawn from the schema, recordings damaged file by file and `arsim bake`
-option combinations, each run through arsim as a user would meet it; prints how many inputs were tried,
-how many loaded or were refused, and every one that escaped with a traceback, hung past 60 s, or passed
-2 GiB of memory. tests/test_fuzz.py runs the same strategies on a small budget.
+"""The long fuzz profile: scenarios drawn from the schema, recordings damaged file by file, damaged HDR
+files, `arsim bake` option combinations and the options of every other command, each run through arsim
+as a user would meet it; prints how many inputs were tried, how many loaded or were refused, and every
+one that escaped with a traceback, printed more than one line (a C library's lines on fd 2 counted),
+left output behind after a refusal, hung past 60 s, or passed 2 GiB of memory. tests/test_fuzz.py runs
+the same strategies on a small budget.
 
-    python benchmarks/fuzz.py                      # 20,000 scenarios, 2,000 recordings, 2,000 option sets
+    python benchmarks/fuzz.py                      # 20,000 scenarios, 2,000 recordings, 2,000 HDR files,
+                                                   # 2,000 bake option sets, 2,000 command lines
     python benchmarks/fuzz.py --scale 0.1          # a tenth of each
     python benchmarks/fuzz.py --only scenarios     # one family
 
@@ -14,11 +17,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import io
 import json
 import resource
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -32,11 +33,12 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 
 from arsim.core.errors import ArsimError  # noqa: E402
 from arsim.scenario.loader import parse_scenario  # noqa: E402
-from tests.fuzzing import bake_options, outcome, recording_mutations, scenario_texts  # noqa: E402
+from tests.fuzzing import (bake_options, check_command, command_options, hdr_files, prepare_inputs,  # noqa: E402
+                           quiet_outcome, recording_mutations, scenario_texts)
 
 HANG_S = 60.0
 MEMORY_LIMIT = 2 << 30
-FAMILIES = {"scenarios": 20000, "recordings": 2000, "options": 2000}
+FAMILIES = {"scenarios": 20000, "recordings": 2000, "images": 2000, "options": 2000, "commands": 2000}
 
 
 class Tally:
@@ -76,15 +78,8 @@ def fuzz_scenarios(n: int, tally: Tally) -> None:
     run()
 
 
-def _quiet(argv: list[str]) -> tuple[str, list[str]]:
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        result = outcome(argv)
-    return result, err.getvalue().strip().splitlines()
-
-
 def _count(tally: Tally, result: str, err: list[str]) -> None:
-    if result == "ok":
+    if result in ("ok", "reached work"):
         tally.ok += 1
     elif len(err) != 1:
         raise AssertionError(f"a refusal of {len(err)} lines: {err[:3]}")
@@ -93,21 +88,45 @@ def _count(tally: Tally, result: str, err: list[str]) -> None:
 
 
 def fuzz_recordings(n: int, tally: Tally, work: Path) -> None:
-    scenario = work / "s.toml"
-    scenario.write_text('[run]\nseed = 3\n[environment]\nmap = "envmaps/courtyard.exr"\nprobe_size = 128\n'
-                        "[capture]\nduration_s = 2.0\n[device.camera]\nwidth = 96\nheight = 72\n[ar]\nenabled = false\n")
-    subprocess.run([sys.executable, "-m", "arsim", "record", str(scenario), "-o", str(work / "rec")], check=True,
-                   capture_output=True)
+    inputs = prepare_inputs(work / "inputs")
 
     @settings(max_examples=n, deadline=None, database=None, suppress_health_check=list(HealthCheck))
     @given(recording_mutations())
     def run(mutate):
         rec = work / "mutated"
         shutil.rmtree(rec, ignore_errors=True)
-        shutil.copytree(work / "rec", rec, ignore=shutil.ignore_patterns("plots"))
+        shutil.copytree(inputs["rec"], rec, ignore=shutil.ignore_patterns("plots"))
         what = mutate(rec)
         with tally.case(what):
-            _count(tally, *_quiet(["info", str(rec)]))
+            _count(tally, *quiet_outcome(["info", str(rec)]))
+    run()
+
+
+def fuzz_images(n: int, tally: Tally, work: Path) -> None:
+    @settings(max_examples=n, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(hdr_files())
+    def run(file):
+        suffix, data = file
+        path = work / f"f{suffix}"
+        path.write_bytes(data)
+        with tally.case(data[:120]):
+            _count(tally, *quiet_outcome(["info", str(path)]))
+    run()
+
+
+def fuzz_commands(n: int, tally: Tally, work: Path) -> None:
+    inputs = prepare_inputs(work / "inputs")
+
+    @settings(max_examples=n, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(command_options(inputs))
+    def run(argv):
+        out = work / "out"
+        shutil.rmtree(out, ignore_errors=True)
+        Path(inputs["out_exr"]).unlink(missing_ok=True)
+        with tally.case(argv):
+            result = check_command(argv, out)  # (a refusal of more than one line, or leaving output, raises)
+            tally.ok += result != "refused"
+            tally.refused += result == "refused"
     run()
 
 
@@ -120,7 +139,7 @@ def fuzz_options(n: int, tally: Tally, work: Path) -> None:
         out = work / "maps"
         shutil.rmtree(out, ignore_errors=True)
         with tally.case(options):
-            result, err = _quiet(["bake", str(env), "-o", str(out), "--size", "16", *options])
+            result, err = quiet_outcome(["bake", str(env), "-o", str(out), "--size", "16", *options])
             if result == "refused" and out.exists():
                 raise AssertionError("a refusal left its output folder")
             _count(tally, result, err)
@@ -143,10 +162,9 @@ def main() -> int:
             work.mkdir()
             if family == "scenarios":
                 fuzz_scenarios(n, tally)
-            elif family == "recordings":
-                fuzz_recordings(n, tally, work)
             else:
-                fuzz_options(n, tally, work)
+                {"recordings": fuzz_recordings, "images": fuzz_images, "options": fuzz_options,
+                 "commands": fuzz_commands}[family](n, tally, work)
             results[family] = tally.summary() | {"seconds": round(time.perf_counter() - t0, 1)}
             r = results[family]
             print(f"{family:<11} {r['tried']:>6} tried, {r['loaded']:>6} loaded, {r['refused']:>6} refused, "

@@ -97,6 +97,44 @@ def test_a_recording_replayed_gives_byte_identical_frames(runs):
         assert (runs / "a" / "frames" / name).read_bytes() == (runs / "replay" / "frames" / name).read_bytes(), name
 
 
+def _json_differences(x, y, path: str = "") -> set[str]:
+    """The keys (dotted, list indices as []) where two JSON values differ."""
+    if isinstance(x, dict) and isinstance(y, dict):
+        return set().union(*(_json_differences(x.get(k), y.get(k), f"{path}.{k}") for k in set(x) | set(y)))
+    if isinstance(x, list) and isinstance(y, list) and len(x) == len(y):
+        return set().union(set(), *(_json_differences(u, v, f"{path}[]") for u, v in zip(x, y)))
+    return set() if x == y else {path}
+
+
+def test_the_same_seed_gives_byte_identical_files_but_for_the_timed_ones(runs):
+    # a run (recording made by it) against a replay of a recording made apart with the same seed:
+    # only the files that carry measured times differ, and in those only the times (and sizes of files)
+    import fnmatch
+    import re
+
+    from arsim.run.pipeline import TIMED_FILES
+
+    def files(root):
+        return {p.relative_to(root).as_posix(): p for p in root.rglob("*") if p.is_file()}
+
+    pairs = [(files(runs / "a" / "recording"), files(runs / "rec"))]
+    a, replay = files(runs / "a"), files(runs / "replay")
+    pairs.append(({k: v for k, v in a.items() if not k.startswith("recording/")}, replay))
+    timed = re.compile(r"seconds|_ms|per_second|\.dur$|\.ts$|misses|within_budget|\.bytes$|^\.recording$")
+    differing = []
+    for first, second in pairs:
+        assert set(first) == set(second)
+        for name in sorted(first):
+            if first[name].read_bytes() == second[name].read_bytes():
+                continue
+            differing.append(name)
+            assert any(fnmatch.fnmatch(name, pattern) for pattern in TIMED_FILES), name
+            if name.endswith(".json"):
+                keys = _json_differences(json.loads(first[name].read_text()), json.loads(second[name].read_text()))
+                assert keys and all(timed.search(k) for k in keys), (name, sorted(k for k in keys if not timed.search(k)))
+    assert "frames/000000.png" not in differing and "capture/env.exr" not in differing and len(a) > 100
+
+
 def test_diff_of_a_run_against_itself_passes_with_flip_zero(runs, tmp_path):
     r = arsim("diff", runs / "a", runs / "replay", "-o", tmp_path / "d")
     assert r.returncode == 0, r.stdout + r.stderr

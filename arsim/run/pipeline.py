@@ -60,6 +60,13 @@ FILE_ROLES = {
 }
 
 
+# The files of a run that carry measured times (seconds, frame and step milliseconds, trace timestamps),
+# which differ from run to run on any machine; every other file is byte-identical for the same scenario
+# and seed (tests/test_run.py checks both).
+TIMED_FILES = ("manifest.json", "metrics.json", "capture/metrics.json", "maps/*/bake.json", "profile/profile.json",
+               "profile/profile.md", "profile/trace.json", "profile/timeline.png", "report/index.html")
+
+
 def versions(gl_renderer: str) -> dict:
     import cv2
     import moderngl
