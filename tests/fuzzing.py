@@ -386,12 +386,16 @@ def check_command(argv: list[str], out: Path) -> str:
     takes_output = argv[0] not in ("convert", "validate")
     full = argv + (["-o", str(out)] if takes_output else [])
     written = [out] if takes_output else [Path(argv[2])] if argv[0] == "convert" and len(argv) > 2 else []
+    def state(path: Path):
+        return path.read_bytes() if path.is_file() else "folder" if path.is_dir() else None
+
+    before = {p: state(p) for p in written}  # (a file there may be an earlier case's convert output)
     with stub_stages():
         result, lines = quiet_outcome(full)
     if result == "refused":
         if len(lines) != 1:
             raise AssertionError(f"a refusal of {len(lines)} lines: {lines[:3]}")
-        left = [str(p) for p in written if p.exists()]
+        left = [str(p) for p in written if state(p) != before[p]]
         if left or list(out.parent.glob(f".{out.name}.*")):
             raise AssertionError(f"a refusal left {left or 'a temporary folder'} behind")
     return result

@@ -97,3 +97,19 @@ def test_a_bundled_scenarios_name_still_names_it_when_a_folder_has_that_name(tmp
     assert scenario_path("quick").name == "quick.toml" and scenario_path("quick").is_file()
     (tmp_path / "indoor").write_text("[run]\n")  # a file of that name is the scenario named
     assert scenario_path("indoor") == tmp_path.joinpath("indoor").relative_to(tmp_path)
+
+
+def test_a_full_disk_midway_through_a_recording_leaves_no_half_recording(tmp_path, monkeypatch, capsys):
+    # the disk fills after the frames, before the IMU streams: a half recording used to stay behind
+    from tests.fuzzing import TINY_SCENARIO
+
+    (tmp_path / "s.toml").write_text(TINY_SCENARIO)
+
+    def full(out_dir, *args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(out_dir / "imu.csv"))
+
+    monkeypatch.setattr("arsim.sensors.recording._write_streams", full)
+    assert cli.main(["record", str(tmp_path / "s.toml"), "-o", str(tmp_path / "rec")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "imu.csv: No space left on device" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
