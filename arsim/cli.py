@@ -438,6 +438,11 @@ def _scenario_file(path: Path | None) -> Path | None:
     return scenario_path(path) if path is not None else None
 
 
+def _final(paths: list[Path], work: Path, output: Path) -> list[Path]:
+    """Where files written into the temporary folder `work` lie once it has become -o."""
+    return [output / p.relative_to(work) for p in paths]
+
+
 @contextlib.contextmanager
 def _output(args: argparse.Namespace, *inputs: Path | None):
     """-o's folder, checked before any work (core/files.check_output_folder); yields the temporary folder
@@ -474,7 +479,7 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
         with progress_bar("comparing methods", len(args.methods) + 3) as update:
             comparison = compare(env, args.spec, args.methods, _parameters(args), args.reference_texels,
                                  args.sh_orders, progress=on_stage)
-        paths = [args.output / p.relative_to(work) for p in write_comparison(comparison, work)]
+        paths = _final(write_comparison(comparison, work), work, args.output)
     for name, errors in comparison.errors.items():
         worst_mean = max(e["mean"] for e in errors)
         worst_max = max(e["max"] for e in errors)
@@ -498,7 +503,7 @@ def cmd_bases_compare(args: argparse.Namespace) -> int:
     with _output(args, args.env) as work, progress_bar("comparing bases", args.signals) as update:
         study = bases_study(work, args.signals, args.seed, selected, environment, args.sun_elevation, args.sun_share,
                             progress=lambda k: update(completed=k))
-        paths = [args.output / p.relative_to(work) for p in study.paths]
+        paths = _final(study.paths, work, args.output)
     for key, stats in study.errors.items():
         print(f"{key:<14} mean error {100 * stats['mean']:8.3f} %   visual {100 * study.visual_errors[key]:7.3f} %")
     print("wrote " + ", ".join(str(p) for p in paths))
@@ -553,7 +558,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
         finished.append(result)
         update(completed=len(finished), description=f"running scenarios: {Path(result['scenario']).stem} done")
 
-    with (_output(args, *map(scenario_path, args.scenarios), args.baselines) as work,
+    with (_output(args, *map(_scenario_file, args.scenarios), args.baselines) as work,
           progress_bar(f"running {len(args.scenarios)} scenarios", len(args.scenarios)) as update):
         summary = run_batch(args.scenarios, work, args.workers, args.ray, args.baselines, args.max_flip, done)
     out = args.output

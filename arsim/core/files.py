@@ -119,7 +119,8 @@ def check_output_folder(path: Path, force: bool = False, inputs: tuple = ()) -> 
         raise ArsimError(f"{path}: is the folder you are in (or holds it), which the output would replace; "
                          "give a new folder for -o, e.g. -o out")
     for source in inputs:
-        if source is not None and (Path(source).resolve() == resolved or resolved in Path(source).resolve().parents):
+        held = Path(source).resolve() if source is not None else None
+        if held is not None and (held == resolved or resolved in held.parents):
             raise ArsimError(f"{path}: holds the input {source}, which the output would replace; give another folder for -o")
     if path.is_dir() and not force and not (path / OUTPUT_MARK).is_file() and any(path.iterdir()):
         raise ArsimError(f"{path}: holds files arsim did not write; give a new or empty folder for -o, "
