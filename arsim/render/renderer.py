@@ -71,6 +71,15 @@ class Material:
     # irradiance map in the diffuse part.
     irradiance_volume: tuple | None = None
     volume_lit: bool = False  # to be lit through the scene's irradiance volume (content.light_objects bakes it)
+    # Precomputed radiance transfer (README: Precomputed radiance transfer): the variant (lighting.prt.VARIANTS)
+    # and per point the (count, order^2) matrices from the light's SH to the variant's coefficients, per vertex
+    # of the mesh (V, count, L2) or per texel of the light map (second UV set, row 0 at the top) (H, W, count,
+    # L2); prt_compressed: the same as CPCA (lighting.prt.Compressed), relit in its place. Renderer.relight
+    # sets the coefficients from the light (they are 0 until it is called); the diffuse part is then the
+    # variant's basis at the normal map's normal, as for a directional light map.
+    prt_variant: str = ""
+    prt_matrices: np.ndarray | None = None
+    prt_compressed: object = None
 
 
 def box_corners(low: np.ndarray, high: np.ndarray) -> np.ndarray:
@@ -144,6 +153,7 @@ class _Drawable:
     sphere: tuple[np.ndarray, float] | None = None  # a ray-cast sphere's world centre and radius
     orbit: Orbit | None = None
     model: np.ndarray | None = None  # where it stands (object to world), for one that moves
+    prt: tuple | None = None  # (the material, the coefficients' buffer (vertex) or texture array (texel))
 
 
 @dataclass
@@ -277,15 +287,21 @@ class Renderer:
         textures = {"light_map": self._image_texture(m.light_map) if m.light_map is not None else None,
                     "normal_map": self._image_texture(m.normal_map) if m.normal_map is not None else None,
                     "coefficient_map": self._coefficient_texture(m.directional_map) if m.directional_map is not None else None}
+        prt_target = None
+        if m.prt_variant:
+            prt_target, prt_textures = self._prt_targets(obj)
+            textures.update(prt_textures)
         if terms:
             program["inm_terms"].value = terms
         # What does not change from frame to frame, set once: each object has its own program.
         program["kd"].value, program["ks"].value = tuple(m.kd), tuple(m.ks)
         units = self._bind_units(program, method, m, textures)
         texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
-                                                  max(tex.size[:2])) for name, tex in textures.items() if tex is not None}
+                                                  max(tex.size[:2])) for name, tex in textures.items()
+                       if tex is not None and name != "sep_basis"}  # (a table over normals, no mip level)
         corners = np.hstack([obj.corners(), np.ones((8, 1))])
-        self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere, obj.orbit, obj.model.copy()))
+        prt = (m, prt_target) if m.prt_variant else None
+        self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere, obj.orbit, obj.model.copy(), prt))
         self.corners = np.stack([d.corners for d in self.objects])
 
     def _check_maps(self, method: str, exponent: float) -> None:
@@ -311,6 +327,10 @@ class Renderer:
             if not 1 <= terms <= count:
                 raise ArsimError(f"inm_terms {terms}: the {m.basis} light map has 1 to {count} terms")
             defines += ["INM", f"BASIS_{basis.name.upper()}", f"BASIS_COUNT {count}"]
+        if m.prt_variant:
+            if m.directional_map is not None:
+                raise ArsimError("a material takes a directional light map or a PRT transfer, not both")
+            defines, terms = self._prt_variant(m, defines)
         if m.irradiance_volume is not None:
             if m.directional_map is not None:
                 raise ArsimError("a material takes a directional light map or an irradiance volume, not both")
@@ -323,11 +343,74 @@ class Renderer:
         defines += ["FLOAT_FILTERING"] if "llvmpipe" in self.ctx.info["GL_RENDERER"] else []
         return defines, terms
 
+    def _prt_variant(self, m: Material, defines: list[str]) -> tuple[list[str], int]:
+        """A PRT material's defines (its matrices checked) and its count of coefficients."""
+        from arsim.lighting.prt import get_variant
+
+        variant = get_variant(m.prt_variant)
+        shape = m.prt_compressed.means.shape[1:2] if m.prt_compressed is not None else None
+        matrices = m.prt_matrices
+        if matrices is None or matrices.ndim not in (3, 4) or matrices.shape[-2] != variant.count:
+            raise ArsimError(f"a prt-{variant.name} material holds (V, {variant.count}, L2) or (H, W, {variant.count}, L2) "
+                             f"matrices, not {None if matrices is None else matrices.shape}; compute its transfer for that variant")
+        if shape is not None and shape != (variant.count,):
+            raise ArsimError(f"the compressed prt-{variant.name} transfer has {shape[0]} coefficients, not {variant.count}")
+        basis = {"gs": "SH", "hl2": "HL2", "sal": "HSH"}.get(variant.name, "SEP")
+        defines = defines + ["INM", "PRT", f"BASIS_{basis}", f"BASIS_COUNT {variant.count}"]
+        return defines + (["PRT_VERTEX"] if matrices.ndim == 3 else []), variant.count
+
+    def _prt_targets(self, obj: SceneObject) -> tuple[object, dict]:
+        """Where a PRT object's coefficients go (a storage buffer per vertex, or a texture array per texel,
+        zeros until relit) and the textures its program reads (the separable basis's)."""
+        from arsim.lighting.prt import get_variant
+
+        m = obj.material
+        variant = get_variant(m.prt_variant)
+        textures = {}
+        if variant.separable is not None:
+            table = np.ascontiguousarray(np.pad(variant.separable.texture, ((0, 0), (0, 0), (0, 4 - variant.count))))
+            sep = self.ctx.texture(table.shape[:2][::-1], 4, table.astype(np.float32).tobytes(), dtype="f4")
+            sep.filter = self.ctx.NEAREST, self.ctx.NEAREST  # (bilinear in the shader, in float, as the reference)
+            textures["sep_basis"] = sep
+        if m.prt_matrices.ndim == 3:
+            if len(m.prt_matrices) != len(obj.mesh.positions):
+                raise ArsimError(f"the PRT transfer has {len(m.prt_matrices)} vertices, the mesh {len(obj.mesh.positions)}; "
+                                 f"compute it for this mesh")
+            return self.ctx.buffer(reserve=len(m.prt_matrices) * variant.count * 3 * 4), textures
+        h, w = m.prt_matrices.shape[:2]
+        texture = self._coefficient_texture(np.zeros((h, w, variant.count, 3), np.float32))
+        textures["coefficient_map"] = texture
+        return texture, textures
+
+    def relight(self, light: np.ndarray) -> None:
+        """Set every PRT object's coefficients from the light's SH (order^2, 3), world axes
+        (lighting.prt.light_sh): per point, its matrices times the light (the relighting of every frame
+        where the light changes)."""
+        from arsim.lighting.prt import relight
+
+        for d in self.objects:
+            if d.prt is None:
+                continue
+            m, target = d.prt
+            order2 = (m.prt_compressed.means if m.prt_compressed is not None else m.prt_matrices).shape[-1]
+            if np.shape(light) != (order2, 3):
+                raise ArsimError(f"the light has {np.shape(light)} SH coefficients; this PRT object needs ({order2}, 3)")
+            coefficients = (m.prt_compressed.relight(light) if m.prt_compressed is not None
+                            else relight(m.prt_matrices.reshape(-1, *m.prt_matrices.shape[-2:]), light))
+            if m.prt_matrices.ndim == 3:
+                target.write(np.ascontiguousarray(coefficients, dtype=np.float32).tobytes())
+            else:
+                h, w = m.prt_matrices.shape[:2]
+                grid = coefficients.reshape(h, w, -1, 3)[::-1]
+                target.write(np.ascontiguousarray(np.moveaxis(grid, 2, 0), dtype=np.float32).tobytes())
+                target.build_mipmaps()
+
     def _geometry(self, obj: SceneObject, defines: list[str], scale: float):
         """The object's program and vertex arrays (one per level of detail): a ray-cast sphere's quad where
         it is a plain sphere, else its meshes; and the sphere (centre, radius) or None."""
         m = obj.material
-        if obj.sphere is not None and m.light_map is None and m.normal_map is None and m.directional_map is None:
+        if (obj.sphere is not None and m.light_map is None and m.normal_map is None and m.directional_map is None
+                and not m.prt_variant):
             # (an irradiance volume is read at the ray-cast hit: the impostor serves it too)
             defines = defines + ["SPHERE_IMPOSTOR"]
             program = self.ctx.program(vertex_shader=_source("sphere.vert", defines), fragment_shader=_source("object.frag", defines))
@@ -340,7 +423,8 @@ class Renderer:
         sizes = {"in_position": 3, "in_normal": 3, "in_tangent": 3, "in_uv": 2, "in_uv2": 2}
         used = [n for n in sizes if n in program]  # the compiler drops what a variant does not read
         layout = " ".join(f"{k}f" if n in used else f"{k}x4" for n, k in sizes.items())
-        meshes = (obj.mesh, *(mesh for mesh, _ in obj.lods))
+        # (per-vertex PRT coefficients are indexed by the mesh's vertices: no coarser meshes)
+        meshes = (obj.mesh, *(mesh for mesh, _ in obj.lods)) if "PRT_VERTEX" not in defines else (obj.mesh,)
         vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.interleaved().tobytes()), layout, *used)],
                                       self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes())) for mesh in meshes]
         program["model"].write(obj.model.T.astype("f4").tobytes())
@@ -443,6 +527,8 @@ class Renderer:
             program["eye"].value = tuple(eye)
             for unit, tex in enumerate(d.units):
                 tex.use(unit)
+            if d.prt is not None and d.prt[0].prt_matrices.ndim == 3:
+                d.prt[1].bind_to_storage_buffer(0)
             # The light and normal maps' mip level per object and frame, log2 of texels per pixel where it is
             # nearest: llvmpipe's per-pixel level (derivatives, two levels) took 40 % of the torus's time.
             for name, length in d.texel_world.items():

@@ -1,9 +1,24 @@
 // The bases of irradiance normal mapping in GLSL, the same functions as arsim/lighting/bases/functions.py
 // (its docstring lists the spec's typos and what is done instead), in tangent space (z the surface
 // normal). Define one of BASIS_SH, BASIS_HL2, BASIS_H, BASIS_MODH, BASIS_HSH, BASIS_MAKHOTKIN,
-// BASIS_ZERNIKE and BASIS_COUNT; basis_values(n) fills the first BASIS_COUNT functions at the unit n.
+// BASIS_ZERNIKE, BASIS_SEP and BASIS_COUNT; basis_values(n) fills the first BASIS_COUNT functions at the unit n.
+// BASIS_SEP: PRT's separable basis (arsim/lighting/prt.py), a table over the normal's orthographic
+// projection, read bilinearly here in float as prt._bilinear reads it.
 
 const float BASES_PI = 3.14159265358979;
+#if defined(BASIS_SEP)
+uniform sampler2D sep_basis;        // 64 x 64, the U columns in RGBA, row 0 at y = -1
+
+vec4 sep_lookup(vec2 xy) {
+    ivec2 size = textureSize(sep_basis, 0);
+    vec2 p = clamp((xy + 1.0) * 0.5 * vec2(size) - 0.5, vec2(0.0), vec2(size - 1));
+    ivec2 i = min(ivec2(floor(p)), size - 2);
+    vec2 a = p - vec2(i);
+    vec4 c00 = texelFetch(sep_basis, i, 0), c10 = texelFetch(sep_basis, i + ivec2(1, 0), 0);
+    vec4 c01 = texelFetch(sep_basis, i + ivec2(0, 1), 0), c11 = texelFetch(sep_basis, i + ivec2(1, 1), 0);
+    return mix(mix(c00, c10, a.x), mix(c01, c11, a.x), a.y);
+}
+#endif
 
 void basis_values(vec3 n, out float b[BASIS_COUNT]) {
     float x = n.x, y = n.y, z = n.z;
@@ -54,6 +69,9 @@ void basis_values(vec3 n, out float b[BASIS_COUNT]) {
     f[6] = sqrt(3.0 / BASES_PI) * r * (1.0 + 8.0 * (zc - 1.0) + 10.0 * (zc - 1.0) * (zc - 1.0));
     f[7] = sqrt(3.0 / BASES_PI) * y * zc * (10.0 * zc - 6.0) * w;
     f[8] = 4.0 * sqrt(15.0 / BASES_PI) * x * y * zc * r / (1.0 + zc);
+#elif defined(BASIS_SEP)
+    vec4 u = sep_lookup(n.xy);
+    f[0] = u.x; f[1] = u.y; f[2] = u.z; f[3] = u.w;
 #elif defined(BASIS_ZERNIKE)
     float w = 1.0 / (1.0 + z);
     f[0] = 1.0 / sqrt(2.0 * BASES_PI); f[1] = -sqrt(2.0 / BASES_PI) * y * sqrt(w); f[2] = sqrt(2.0 / BASES_PI) * x * sqrt(w);

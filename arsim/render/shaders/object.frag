@@ -31,6 +31,9 @@ uniform sampler2DArray coefficient_map;  // a layer per basis coefficient of the
 uniform float coefficient_map_lod;
 uniform int inm_terms;              // the spec's level of detail: the leading terms summed
 #endif
+#ifdef PRT_VERTEX
+in vec3 v_prt[BASIS_COUNT];         // precomputed radiance transfer relit per vertex (object.vert)
+#endif
 #ifdef SPHERE_IMPOSTOR
 uniform vec3 center;                // world
 uniform float radius;
@@ -109,12 +112,17 @@ void main() {
 #endif
 #ifdef INM
     // Irradiance normal mapping: the basis at the tangent-space normal, weighted by the texel's
-    // coefficients of the irradiance E; E / pi is what an irradiance map holds.
+    // coefficients of the irradiance E; E / pi is what an irradiance map holds. PRT the same, its
+    // coefficients relit from the transfer per texel (the coefficient map) or per vertex.
     float basis[BASIS_COUNT];
     basis_values(n_ts, basis);
     vec3 irradiance = vec3(0.0);
     for (int k = 0; k < inm_terms; k++) {
+#ifdef PRT_VERTEX
+        irradiance += basis[k] * v_prt[k];
+#else
         irradiance += basis[k] * textureLod(coefficient_map, vec3(v_uv2, float(k)), coefficient_map_lod).rgb;
+#endif
     }
     vec3 diffuse = irradiance / BASES_PI;
 #elif defined(VOLUME)
@@ -153,6 +161,9 @@ void main() {
     debug_normal = vec4(n, 0.0);
     debug_incident = vec4(v_world, 0.0);
 #endif
+#elif defined(PRT_VERTEX)
+    debug_normal = vec4(n_ts, 0.0);      // the normal and the world point (tests: coefficients linear in it)
+    debug_incident = vec4(v_world, 0.0);
 #elif defined(INM)
     debug_normal = vec4(n_ts, v_uv2.x);  // what the NumPy reference evaluates the light map with
     debug_incident = vec4(v, v_uv2.y);

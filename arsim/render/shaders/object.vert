@@ -15,6 +15,12 @@ out vec3 v_normal;
 out vec3 v_tangent;
 out vec2 v_uv;
 out vec2 v_uv2;
+#ifdef PRT_VERTEX
+// Precomputed radiance transfer per vertex: the coefficients Renderer.relight wrote, (count, 3) per vertex
+// in the mesh's order, interpolated to the fragments like any vertex value (the spec's section 4).
+layout(std430, binding = 0) readonly buffer PrtCoefficients { float prt[]; };
+out vec3 v_prt[BASIS_COUNT];
+#endif
 
 void main() {
     vec4 world = model * vec4(in_position, 1.0);
@@ -24,4 +30,10 @@ void main() {
     v_uv = in_uv;
     v_uv2 = in_uv2;
     gl_Position = view_projection * world;
+#ifdef PRT_VERTEX
+    for (int k = 0; k < BASIS_COUNT; k++) {
+        int i = (gl_VertexID * BASIS_COUNT + k) * 3;
+        v_prt[k] = vec3(prt[i], prt[i + 1], prt[i + 2]);
+    }
+#endif
 }
