@@ -100,9 +100,12 @@ class Transfer:
 
 
 def transfer_rule(samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """About `samples` directions over the sphere (Gauss in z, uniform in phi: 1 : 2) and their weights."""
+    """About `samples` directions over the sphere and their weights: Gauss in the height, uniform in the
+    azimuth (1 : 2), the pole along world +y (up), so that the rule resolves elevation above the table and
+    a turn about the vertical by a multiple of its azimuth step maps it onto itself."""
     n_z = max(int(round(sqrt(samples / 2))), 4)
-    return sphere_quadrature(n_z, 2 * n_z)
+    d, w = sphere_quadrature(n_z, 2 * n_z)
+    return d[:, [1, 2, 0]], w  # (x, y, z) <- (y, z, x): the rule's pole to +y
 
 
 def local_sh9_rotation(tangents: np.ndarray, normals: np.ndarray) -> np.ndarray:

@@ -18,9 +18,11 @@ from arsim.core.errors import ArsimError
 from arsim.core.resample import to_layout
 from arsim.lighting.bases import parse_basis
 from arsim.lighting.bases.lightmap import Surface, bake_directional, bake_irradiance_volume, probe_samples
+from arsim.lighting.prt import VARIANTS, get_variant, transfer_key
 from arsim.render.mesh_lightmap import lightmap_texels, lightmap_unwrap, ray_caster
 from arsim.render.meshes import Mesh, grid_mesh, load_mesh, uv_sphere
 from arsim.render.renderer import Material, Orbit, SceneObject
+from arsim.render.transfer import PrtSettings, with_transfer
 
 SPHERE_EXPONENTS = (1.0, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0)  # thesis figure 5.3
 
@@ -149,12 +151,19 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
 class ObjectLighting:
     """An object's lighting, parsed once from its [[render.objects]] lighting string."""
 
-    kind: str  # "ibl", "lightmap-ao", "volume" or "inm" (a directional light map)
+    kind: str  # "ibl", "lightmap-ao", "volume", "inm" (a directional light map) or "prt"
     basis: str = ""  # inm: the basis and its count, e.g. "modh6"
+    variant: str = ""  # prt: the variant (lighting.prt.VARIANTS)
+    per_texel: bool = False  # prt: the transfer per light-map texel (else per vertex)
 
     @property
     def inm(self) -> bool:
         return self.kind == "inm"
+
+    @property
+    def texels(self) -> bool:
+        """Whether the object needs light-map texels (a directional light map, or PRT per texel)."""
+        return self.kind == "inm" or self.per_texel
 
 
 IBL = ObjectLighting("ibl")
@@ -166,12 +175,15 @@ def parse_lighting(o) -> ObjectLighting:
     ArsimError)."""
     if o.lighting in ("ibl", "lightmap-ao", "volume"):
         return IBL if o.lighting == "lightmap-ao" and not o.light_map else ObjectLighting(o.lighting)
-    if not o.lighting.startswith("inm-"):
-        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\": use ibl, lightmap-ao, volume or inm-BASIS "
-                         f"(e.g. inm-modh6, inm-h4, inm-sh9)")
+    if not o.lighting.startswith(("inm-", "prt-")):
+        raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\": use ibl, lightmap-ao, volume, inm-BASIS "
+                         f"(e.g. inm-modh6, inm-h4, inm-sh9) or prt-VARIANT ({', '.join('prt-' + v for v in VARIANTS)})")
     if o.orbit_m > 0:
         raise ArsimError(f"[[render.objects]] lighting = \"{o.lighting}\" with orbit_m = {o.orbit_m:g}: a directional light map "
-                         f"holds the light where the object stands; give an object that moves lighting = volume (or ibl)")
+                         f"holds the light where the object stands (so does a PRT transfer); give an object that moves lighting = volume (or ibl)")
+    if o.lighting.startswith("prt-"):
+        get_variant(o.lighting[4:])  # (an unknown one refused here)
+        return ObjectLighting("prt", variant=o.lighting[4:], per_texel=o.prt_at == "texel")
     basis, count = parse_basis(o.lighting[4:])
     if o.inm_terms > count:
         raise ArsimError(f"[[render.objects]] inm_terms = {o.inm_terms}: {o.lighting} has {count} terms; give 1 to {count} (0: all)")
@@ -252,6 +264,10 @@ def scene_objects(section) -> list[SceneObject]:
                 objects[k] = dataclasses.replace(objects[k], material=material)
             if o.orbit_m > 0:
                 objects[k] = dataclasses.replace(objects[k], orbit=Orbit(o.orbit_m, o.orbit_period_s))
+            if lighting.kind == "prt":  # (the transfer is computed by light_objects, with the scene's visibility)
+                material = dataclasses.replace(objects[k].material, prt_variant=lighting.variant, light_map=None)
+                settings = PrtSettings(lighting.variant, o.prt_order, lighting.per_texel, o.prt_samples, o.prt_clusters)
+                objects[k] = dataclasses.replace(objects[k], material=material, transfer=settings)
     return objects
 
 
@@ -275,12 +291,11 @@ def _sphere_object(o, centre: np.ndarray, exponent: float, lighting: ObjectLight
     """A sphere of the scenario's (a row's: one of them) standing on the table at centre; with lighting =
     inm-..., drawn as its mesh (the light map in its UVs), else ray-cast (lightmap-ao: plain IBL, the thesis
     bakes occlusion for the torus only)."""
-    inm = lighting.inm
     material = Material(o.kd, o.ks, exponent, method=o.method, basis=lighting.basis, inm_terms=o.inm_terms or None)
     size = (o.lightmap_size, 2 * o.lightmap_size)
     return SceneObject(uv_sphere(o.size_m, *tessellation), material, translation(*centre), sphere=o.size_m,
                        distance=_sphere_distance(centre, o.size_m),
-                       lightmap_surface=(lambda: sphere_texels(o.size_m, size, centre)) if inm else None)
+                       lightmap_surface=(lambda: sphere_texels(o.size_m, size, centre)) if lighting.texels else None)
 
 
 LIGHT_SIZE = 32  # the light's angle map the directional light maps sum (every texel's energy kept)
@@ -289,15 +304,10 @@ LIGHT_SIZE = 32  # the light's angle map the directional light maps sum (every t
 VOLUME_GRID = (9, 5, 9)  # grid points of the irradiance volume over the objects' box (x, y, z)
 
 
-def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneObject]:
-    """The objects with their directional light maps (lighting = inm-...) and the scene's irradiance
-    volume (lighting = volume) baked from an angle-map light (world frame): visibility against the
-    table top and every object that stands still and is not lit by the volume (those move, or may), by
-    its distance function or its mesh; the volume's box holds every object wherever it goes."""
-    inm = [o.material.basis and o.lightmap_surface is not None for o in objects]
-    lit_by_volume = [o.material.volume_lit for o in objects]
-    if not any(inm) and not any(lit_by_volume):
-        return objects
+def scene_occlusion(objects: list[SceneObject], lit_by_volume: list[bool]):
+    """blocked(origins (T, 3), directions (K, T, 3)) -> (K, T): whether rays hit the table top or an object
+    that stands still and is not lit by the volume (by its distance function or its mesh); and a key of
+    that geometry (the occluders' meshes where they stand) for caches."""
     occluders = [o for o, moving in zip(objects, lit_by_volume) if not moving and o.orbit is None]
     shapes = [o.distance for o in occluders if o.distance is not None]
     scale = 0.01  # metres: the hit and step floors of the sphere tracing
@@ -313,6 +323,22 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
         hit = sphere_trace(origins, directions, distance, scale, 2.0)
         return hit | cast(origins, directions) if cast is not None else hit
 
+    key = transfer_key("table y=0", *[a for o in occluders for a in (o.mesh.positions, o.mesh.indices, o.model,
+                                                                        o.distance is not None, o.mesh_occludes)])
+    return blocked, key
+
+
+def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneObject]:
+    """The objects with their directional light maps (lighting = inm-...), their PRT transfer (lighting =
+    prt-..., relit from this light) and the scene's irradiance volume (lighting = volume) baked from an
+    angle-map light (world frame): visibility against the table top and every object that stands still and
+    is not lit by the volume (those move, or may), by its distance function or its mesh; the volume's box
+    holds every object wherever it goes."""
+    inm = [o.material.basis and o.lightmap_surface is not None for o in objects]
+    lit_by_volume = [o.material.volume_lit for o in objects]
+    if not any(inm) and not any(lit_by_volume) and all(o.transfer is None for o in objects):
+        return objects
+    blocked, scene_key = scene_occlusion(objects, lit_by_volume)
     directions, weighted = probe_samples(to_layout(light, "anglemap", LIGHT_SIZE))
     volume = None
     if any(lit_by_volume):
@@ -330,6 +356,8 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
             o = dataclasses.replace(o, material=dataclasses.replace(o.material, directional_map=coefficients))
         elif moving:
             o = dataclasses.replace(o, material=dataclasses.replace(o.material, irradiance_volume=volume))
+        elif o.transfer is not None:
+            o = with_transfer(o, o.transfer, blocked, scene_key, light)
         out.append(o)
     return out
 
@@ -352,7 +380,7 @@ def mesh_object(o, lighting: ObjectLighting = IBL) -> SceneObject:
     model[:3, :3] *= scale
     material = Material(o.kd, o.ks, o.exponent, None, ridges_normal_map() if o.normal_map and textured else None, o.method)
     surface = None
-    if lighting.inm:
+    if lighting.texels:
         mesh, shape = lightmap_unwrap(mesh, o.lightmap_size)
         material = dataclasses.replace(material, basis=lighting.basis, inm_terms=o.inm_terms or None)
         surface = (lambda: lightmap_texels(mesh, model, shape))

@@ -80,6 +80,7 @@ class Material:
     prt_variant: str = ""
     prt_matrices: np.ndarray | None = None
     prt_compressed: object = None
+    prt_light: np.ndarray | None = None  # the light's SH (order^2, 3) it is relit with when added (None: zeros)
 
 
 def box_corners(low: np.ndarray, high: np.ndarray) -> np.ndarray:
@@ -120,6 +121,7 @@ class SceneObject:
     distance: object = None  # (points (..., 3)) -> (...)
     mesh_occludes: bool = False  # it occludes by its mesh (ray casts): a mesh file's object, with no distance function
     orbit: Orbit | None = None  # it moves (the model places it at the orbit's centre); None: it stands still
+    transfer: object = None  # lighting = prt-...: its PRT settings (render.transfer.PrtSettings), computed by light_objects
 
     def corners(self) -> np.ndarray:
         """(8, 3) the world corners of its mesh's bounding box (where it stands)."""
@@ -302,6 +304,8 @@ class Renderer:
         corners = np.hstack([obj.corners(), np.ones((8, 1))])
         prt = (m, prt_target) if m.prt_variant else None
         self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere, obj.orbit, obj.model.copy(), prt))
+        if prt is not None and m.prt_light is not None:
+            self._relight(self.objects[-1], m.prt_light)
         self.corners = np.stack([d.corners for d in self.objects])
 
     def _check_maps(self, method: str, exponent: float) -> None:
@@ -386,24 +390,26 @@ class Renderer:
         """Set every PRT object's coefficients from the light's SH (order^2, 3), world axes
         (lighting.prt.light_sh): per point, its matrices times the light (the relighting of every frame
         where the light changes)."""
+        for d in self.objects:
+            if d.prt is not None:
+                self._relight(d, light)
+
+    def _relight(self, d: _Drawable, light: np.ndarray) -> None:
         from arsim.lighting.prt import relight
 
-        for d in self.objects:
-            if d.prt is None:
-                continue
-            m, target = d.prt
-            order2 = (m.prt_compressed.means if m.prt_compressed is not None else m.prt_matrices).shape[-1]
-            if np.shape(light) != (order2, 3):
-                raise ArsimError(f"the light has {np.shape(light)} SH coefficients; this PRT object needs ({order2}, 3)")
-            coefficients = (m.prt_compressed.relight(light) if m.prt_compressed is not None
-                            else relight(m.prt_matrices.reshape(-1, *m.prt_matrices.shape[-2:]), light))
-            if m.prt_matrices.ndim == 3:
-                target.write(np.ascontiguousarray(coefficients, dtype=np.float32).tobytes())
-            else:
-                h, w = m.prt_matrices.shape[:2]
-                grid = coefficients.reshape(h, w, -1, 3)[::-1]
-                target.write(np.ascontiguousarray(np.moveaxis(grid, 2, 0), dtype=np.float32).tobytes())
-                target.build_mipmaps()
+        m, target = d.prt
+        order2 = (m.prt_compressed.means if m.prt_compressed is not None else m.prt_matrices).shape[-1]
+        if np.shape(light) != (order2, 3):
+            raise ArsimError(f"the light has {np.shape(light)} SH coefficients; this PRT object needs ({order2}, 3)")
+        coefficients = (m.prt_compressed.relight(light) if m.prt_compressed is not None
+                        else relight(m.prt_matrices.reshape(-1, *m.prt_matrices.shape[-2:]), light))
+        if m.prt_matrices.ndim == 3:
+            target.write(np.ascontiguousarray(coefficients, dtype=np.float32).tobytes())
+        else:
+            h, w = m.prt_matrices.shape[:2]
+            grid = coefficients.reshape(h, w, -1, 3)[::-1]
+            target.write(np.ascontiguousarray(np.moveaxis(grid, 2, 0), dtype=np.float32).tobytes())
+            target.build_mipmaps()
 
     def _geometry(self, obj: SceneObject, defines: list[str], scale: float):
         """The object's program and vertex arrays (one per level of detail): a ray-cast sphere's quad where

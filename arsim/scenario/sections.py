@@ -218,13 +218,24 @@ class RenderObjectSection:
                                  "scene's irradiance volume, for objects that move: SH bands 0-2 on a grid over the objects, "
                                  "with the other objects' occlusion), or inm-BASIS (any kind that stands still: a directional "
                                  "light map baked from the light with visibility, e.g. inm-modh6, inm-h4, inm-sh9, inm-hl2; see arsim "
-                                 "bases compare)")
+                                 "bases compare), or prt-VARIANT (any kind that stands still: precomputed radiance transfer, "
+                                 "relit from the light's SH: prt-gs, prt-sep, prt-sep-c, prt-hl2, prt-sal)")
     inm_terms: int = setting(0, min=0, max=9,
                              help="lighting = inm-...: the spec's level of detail, the leading terms summed (1: the constant "
                                   "term, the light map; 4: with the linear ones; 0: all)")
     lightmap_size: int = setting(32, min=1, max=4096,
                                  help="lighting = inm-...: texels of the directional light map's shorter side (a mesh: the most "
                                       "on each side of its unwrapped atlas)")
+    prt_order: int = setting(5, min=3, max=10,
+                             help="lighting = prt-...: bands of the light's SH the transfer takes (5: bands 0-4)")
+    prt_at: str = setting("vertex", choices=("vertex", "texel"),
+                          help="lighting = prt-...: the transfer per vertex of the mesh, or per texel of the light map "
+                               "(lightmap_size)")
+    prt_samples: int = setting(2048, min=64, max=65536,
+                               help="lighting = prt-...: directions per point the transfer integrates over (rays cast)")
+    prt_clusters: int = setting(0, min=0, max=65536,
+                                help="lighting = prt-...: CPCA clusters of the transfer matrices (4 principal vectors "
+                                     "each; 0: uncompressed)")
     orbit_m: float = setting(0.0, min=0.0, max=100.0, unit="m",
                              help="an object that moves: the radius of the circle it goes round about position_m on the "
                                   "table, counter-clockwise seen from above (0: it stands still); it takes lighting = ibl, "
