@@ -511,6 +511,32 @@ def cmd_bases_compare(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------------------------
+# arsim prt
+
+
+def cmd_prt_compare(args: argparse.Namespace) -> int:
+    from arsim.core.assets import assets_dir
+    from arsim.evaluate.prt_compare import DEFAULT_PROBES, prt_study
+    from arsim.lighting.prt import check_order, get_variant
+
+    for v in args.variants:  # bad names and orders fail here, before any work
+        get_variant(v)
+    check_order(args.order)
+    if args.samples > 65536:
+        raise ArsimError(f"--samples {args.samples}: give at most 65536 directions per texel (memory grows with them)")
+    paths = args.env or [assets_dir() / "envmaps" / f"{name}.exr" for name in DEFAULT_PROBES]
+    probes = {Path(p).stem: _probe(p, 128) for p in paths}
+    with _output(args, *args.env) as work, progress_bar("comparing PRT variants", 1.0) as update:
+        written, scores = prt_study(work, probes, args.variants, args.order, args.samples,
+                                    progress=lambda f, label: update(completed=f, description=f"PRT: {label}"))
+        written = _final(written, work, args.output)
+    for probe, row in scores.items():
+        print(f"{probe:<10} " + "  ".join(f"{name} FLIP {v['flip']:.3f}" for name, v in row.items()))
+    print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
 # arsim validate
 
 
@@ -685,6 +711,29 @@ def _bases_parser(sub: argparse._SubParsersAction) -> None:
     q.set_defaults(run=cmd_bases_compare)
 
 
+def _prt_parser(sub: argparse._SubParsersAction) -> None:
+    from arsim.lighting.prt import DEFAULT_ORDER, MAX_ORDER, MIN_ORDER, VARIANTS
+
+    p = _command(sub, "prt", "precomputed radiance transfer with normal maps (the normal-mapping-prt spec): `compare` "
+                 "measures its variants against a per-pixel reference", "arsim prt compare -o prt")
+    prt_sub = p.add_subparsers(dest="prt_command", metavar="ACTION", parser_class=_Parser, required=True)
+    q = _command(prt_sub, "compare", "the variants (gs, sep, sep-c, hl2, sal) and the plain PRT on a normal-mapped torus "
+                 "against a per-pixel reference under three probes: FLIP and relative MSE (prt_compare.md/.json), the "
+                 "images side by side (variants.png), and the SH of bands 0-2 fitted in each hemispherical basis "
+                 "(sh_projection.json/.md)",
+                 "arsim prt compare -o prt   (or: --env assets/envmaps/studio.exr --order 7 --variants gs,sep-c)")
+    _output_option(q, "output folder")
+    q.add_argument("--env", type=_path, nargs="+", default=[], metavar="ENV",
+                   help="the probes (HDR environments; default: the bundled interior, sunrise and city)")
+    q.add_argument("--order", type=int, default=DEFAULT_ORDER, metavar="L",
+                   help=f"bands of the light's SH, {MIN_ORDER} to {MAX_ORDER} (default {DEFAULT_ORDER}: bands 0-4)")
+    q.add_argument("--samples", type=_positive("--samples"), default=1024, metavar="K",
+                   help="directions per light-map texel of the transfer (default 1024)")
+    q.add_argument("--variants", type=lambda t: [v.strip() for v in t.split(",") if v.strip()], default=list(VARIANTS),
+                   metavar="V,V,...", help=f"the variants (default all: {','.join(VARIANTS)})")
+    q.set_defaults(run=cmd_prt_compare)
+
+
 def _compare_methods_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "compare-methods", "measure every map method against accurate: tables, a figure grid, SH error by order",
                  "arsim compare-methods assets/envmaps/courtyard.exr -o compare --size 128")
@@ -826,7 +875,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"arsim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for add in (_info_parser, _convert_parser, _bake_parser, _bases_parser, _compare_methods_parser, _record_parser,
+    for add in (_info_parser, _convert_parser, _bake_parser, _bases_parser, _prt_parser, _compare_methods_parser, _record_parser,
                 _capture_parser, _render_parser, _profile_parser, _run_parser, _batch_parser, _diff_parser, _validate_parser):
         add(sub)
     return parser

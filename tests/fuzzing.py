@@ -278,7 +278,7 @@ class ReachedWork(Exception):
 # would start a minute-long run; what is fuzzed is that every check refuses in one line, before any output)
 STAGES = ("arsim.run.stages.recorded", "arsim.run.stages.measured_capture", "arsim.run.stages.captured_sweep",
           "arsim.run.stages.render_session", "arsim.run.stages.profile_session", "arsim.run.pipeline.run_scenario",
-          "arsim.run.batch.run_batch")
+          "arsim.run.batch.run_batch", "arsim.evaluate.prt_compare.prt_study")
 
 
 @contextlib.contextmanager
@@ -309,7 +309,7 @@ def _paths(inputs: dict[str, str]) -> st.SearchStrategy:
 
 def command_options(inputs: dict[str, str]) -> st.SearchStrategy:
     """argv of one command (-o left to the caller): convert, diff, compare-methods, capture, render, profile,
-    run, batch or validate, with options drawn from their flags, values fuzzed; `inputs` names prepared files
+    run, batch, validate or prt compare, with options drawn from their flags, values fuzzed; `inputs` names prepared files
     ("env", "png", "rec", "maps", "run", ...) so that some values are good."""
     numbers, path = OPTION_VALUES, _paths(inputs)
     # sizes and orders that run in a second (a 512² comparison is a long job, not a bug), or are refused
@@ -329,6 +329,8 @@ def command_options(inputs: dict[str, str]) -> st.SearchStrategy:
         "batch": {"--workers": numbers, "--ray": st.sampled_from(["auto", "127.0.0.1:1", "x", ":", "host:port"]),
                   "--baselines": path, "--max-flip": numbers},
         "validate": {},
+        "prt": {"--env": path, "--order": small, "--samples": numbers,
+                "--variants": st.sampled_from(["gs,sep", "sal", "nope", ",", ""])},
     }
     scenario = st.one_of(st.sampled_from(["quick", "indoor", "nosuch", inputs["scenario"], inputs["env"], inputs["rec"], ""]),
                          st.none())
@@ -336,7 +338,8 @@ def command_options(inputs: dict[str, str]) -> st.SearchStrategy:
                   "diff": st.tuples(path, path).map(list),
                   "compare-methods": st.tuples(path, st.sampled_from(["8", "16", "12", "0", "x"])).map(lambda p: [p[0], "--size", p[1]]),
                   "capture": st.one_of(path, scenario).map(lambda p: [] if p is None else [p]),
-                  "batch": st.lists(scenario.filter(lambda s: s is not None), min_size=1, max_size=2)}
+                  "batch": st.lists(scenario.filter(lambda s: s is not None), min_size=1, max_size=2),
+                  "prt": st.just(["compare"])}
 
     @st.composite
     def draw_argv(draw) -> list[str]:

@@ -146,7 +146,9 @@ def test_scenario_objects_get_directional_light_maps_baked_from_the_light(tmp_pa
 @pytest.mark.parametrize("lighting, fragment", [
     ("inm-nosuch4", "unknown basis 'nosuch'"),
     ("inm-h5", "has 4 or 6 coefficients, not 5"),
-    ("shiny", "use ibl, lightmap-ao, volume or inm-BASIS"),
+    ("shiny", "use ibl, lightmap-ao, volume, inm-BASIS"),
+    ("shiny", "or prt-VARIANT (prt-gs, prt-sep, prt-sep-c, prt-hl2, prt-sal)"),
+    ("prt-nosuch", "unknown PRT variant 'nosuch'"),
 ])
 def test_a_bad_lighting_is_refused_in_one_line(tmp_path, lighting, fragment):
     from tests.test_cli import arsim, assert_one_line_error

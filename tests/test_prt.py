@@ -258,3 +258,67 @@ def test_turning_the_light_is_turning_the_scene_the_other_way():
     back = prt.compute_transfer(*vertex_frames(turned.mesh, turned.model), order, blocked_turned, samples).relight(light)
     assert np.abs(lit).max() > 0.1
     np.testing.assert_allclose(lit, back, atol=1e-5 * np.abs(lit).max())
+
+
+def test_the_sh_projection_table_has_its_interface_shape_and_the_exact_fits():
+    from arsim.evaluate.prt_compare import sh_projection
+
+    table = sh_projection()
+    assert table["functions"] == ["Y00", "Y1-1", "Y10", "Y11", "Y2-2", "Y2-1", "Y20", "Y21", "Y22"]
+    assert list(table["mse"]) == ["hl2", "sal4", "sal9", "h4", "h6", "sep4"]
+    assert all(len(v) == 9 and all(0 <= e <= 0.5 + 1e-9 for e in v) for v in table["mse"].values())
+    mse = table["mse"]
+    # what each span holds exactly: H4 = {1, x, y, z}, H6 adds xy and x^2 - y^2, HSH holds the constant
+    # and, shifted, z; HL2 (three linear functions, no constant) holds x, y, z but not 1
+    assert max(mse["h4"][:4]) < 1e-20 and max(mse["h6"][:5] + [mse["h6"][8]]) < 1e-20
+    assert mse["sal4"][0] < 1e-20 and mse["sal4"][2] < 1e-20 and mse["sal9"][6] < 1e-20
+    assert max(mse["hl2"][1:4]) < 1e-20 and mse["hl2"][0] > 0.1
+    # a function odd in both x and y (xy) or of the form x^2 - y^2 is out of reach of every basis of <= 4
+    for key in ("hl2", "sal4", "h4", "sep4"):
+        assert abs(mse[key][4] - 0.5) < 1e-9 and abs(mse[key][8] - 0.5) < 1e-9
+
+
+def test_prt_compare_writes_its_tables_and_images(tmp_path):
+    import json
+
+    from tests.test_cli import arsim
+
+    env = __import__("pathlib").Path(__file__).resolve().parents[1] / "assets" / "envmaps" / "city.exr"
+    r = arsim("prt", "compare", "-o", tmp_path / "prt", "--env", env, "--samples", "128", "--variants", "gs,hl2")
+    assert r.returncode == 0, r.stderr
+    scores = json.loads((tmp_path / "prt" / "prt_compare.json").read_text())["scores"]["city"]
+    assert set(scores) == {"prt", "gs", "hl2"}
+    # the normal map's detail: the gold standard is nearer the reference than PRT without it, and than HL2
+    assert scores["gs"]["mse"] < scores["prt"]["mse"] and scores["gs"]["mse"] < scores["hl2"]["mse"]
+    for name in ("prt_compare.md", "variants.png", "sh_projection.json", "sh_projection.md"):
+        assert (tmp_path / "prt" / name).stat().st_size > 100
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--variants", "gs,nope"], "unknown PRT variant 'nope'"),
+    (["--order", "2"], "PRT order 2: give 3 to 10"),
+    (["--samples", "100000"], "at most 65536"),
+])
+def test_prt_compare_refuses_bad_options_in_one_line(tmp_path, args, fragment):
+    from tests.test_cli import arsim, assert_one_line_error
+
+    assert_one_line_error(arsim("prt", "compare", "-o", tmp_path / "out", *args), fragment)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_scenario_with_a_bad_prt_order_is_refused_in_one_line(tmp_path):
+    from tests.test_cli import arsim, assert_one_line_error
+
+    path = tmp_path / "bad.toml"
+    path.write_text('[[render.objects]]\nkind = "torus"\nlighting = "prt-gs"\nprt_order = 2\n')
+    assert_one_line_error(arsim("validate", path), "prt_order")
+
+
+def test_prt_per_texel_without_a_light_map_uv_set_is_refused():
+    """A mesh object made without a light-map unwrap (no second UV set) asked for its transfer per texel."""
+    from arsim.render.renderer import SceneObject
+    from arsim.render.transfer import PrtSettings, object_transfer
+
+    obj = SceneObject(uv_sphere(0.05, 8, 16), Material(KD, KS0, 80.0))
+    with pytest.raises(ArsimError, match="PRT per texel needs the object's light-map UV set"):
+        object_transfer(obj, PrtSettings("gs", per_texel=True), None, "")

@@ -109,6 +109,49 @@ def lighting_label(basis: Basis, count: int, quantise: bool) -> str:
     return f"{basis.name}{count}" + (" 8-bit" if quantise else "")
 
 
+@dataclass
+class TorusPixels:
+    """The torus's view and, over its hit pixels, the normal map's normals (world, tangent space), the light's
+    samples, and the reference E (hit pixels, 3)."""
+
+    view: TorusView
+    n_world: np.ndarray
+    n_tangent: np.ndarray
+    directions: np.ndarray
+    weighted: np.ndarray
+    reference: np.ndarray
+
+
+def torus_reference(probe: np.ndarray, width: int = 160, height: int = 120, light_size: int = 32,
+                    normal_depth: float = 0.6, visibility: np.ndarray | None = None) -> TorusPixels:
+    """The torus's view, its pixels' tangent-space normals (the normal map's), the probe's samples at
+    light_size² and the per-pixel reference E over the hit pixels: the perturbed normal's cosine over the
+    surface's own hemisphere (light from below it is hidden by the surface), a ray to each environment
+    texel for the visibility (torus and table). visibility: the (K, hit pixels) rays seen, when known
+    (reference_visibility: it does not depend on the light)."""
+    view = torus_view(width, height)
+    hit = view.hit
+    texel = sample_periodic(ridges_normal_map(depth=normal_depth), view.uv[hit])
+    n_world = perturbed_normal(view.normals[hit], view.tangents[hit], texel)
+    n_tangent = normalize(2.0 * texel - 1.0)
+    directions, weighted = probe_samples(to_layout(probe, "anglemap", light_size))
+    if visibility is None:
+        visibility = reference_visibility(view, directions)
+    reference = np.einsum("kt,kc->tc", np.maximum(directions @ n_world.T, 0.0) * visibility, weighted)
+    return TorusPixels(view, n_world, n_tangent, directions, weighted, reference)
+
+
+def reference_visibility(view: TorusView, directions: np.ndarray) -> np.ndarray:
+    """(K, hit pixels): whether each pixel's point sees each direction (above its surface, no hit)."""
+    n_g, points = view.normals[view.hit], view.points[view.hit]
+    seen = np.zeros((len(directions), len(n_g)), bool)
+    for start in range(0, len(n_g), 64):
+        sl = slice(start, start + 64)
+        rays = np.broadcast_to(directions[:, None, :], (len(directions), len(n_g[sl]), 3))
+        seen[:, sl] = (directions @ n_g[sl].T > 0) & ~_blocked(points[sl], rays)
+    return seen
+
+
 def compare_on_torus(probe: np.ndarray, lightings: list[tuple[Basis, int, bool]], width: int = 160, height: int = 120,
                      lightmap_size: tuple[int, int] = (32, 64), light_size: int = 32,
                      normal_depth: float = 0.6) -> InmComparison:
@@ -117,23 +160,10 @@ def compare_on_torus(probe: np.ndarray, lightings: list[tuple[Basis, int, bool]]
     resampled to light_size² (every texel's energy kept) with a ray to each texel for the visibility; the
     thesis's irradiance map and AO map are its own (accurate, rays). With quantise, the light map goes
     through the spec's 8-bit storage (encode_8bit) first."""
-    view = torus_view(width, height)
-    hit = view.hit
-    normal_map = ridges_normal_map(depth=normal_depth)
-    texel = sample_periodic(normal_map, view.uv[hit])
-    n_world = perturbed_normal(view.normals[hit], view.tangents[hit], texel)
-    n_tangent = normalize(2.0 * texel - 1.0)
-    directions, weighted = probe_samples(to_layout(probe, "anglemap", light_size))
-    # Reference: the perturbed normal's cosine over the surface's own hemisphere (light from below the
-    # surface is hidden by it), a ray to each environment texel for the visibility.
-    n_g, points = view.normals[hit], view.points[hit]
-    reference = np.zeros((hit.sum(), 3))
-    for start in range(0, len(n_g), 64):
-        sl = slice(start, start + 64)
-        rays = np.broadcast_to(directions[:, None, :], (len(directions), len(n_g[sl]), 3))
-        seen = (directions @ n_g[sl].T > 0) & ~_blocked(points[sl], rays)
-        cosine = np.maximum(directions @ n_world[sl].T, 0.0)
-        reference[sl] = np.einsum("kt,kc->tc", cosine * seen, weighted)
+    pixels = torus_reference(probe, width, height, light_size, normal_depth)
+    view, n_world, n_tangent, directions, weighted = (pixels.view, pixels.n_world, pixels.n_tangent, pixels.directions,
+                                                      pixels.weighted)
+    hit, reference = view.hit, pixels.reference
     # INM: the directional light map at the light-map texel, evaluated with the tangent-space normal.
     lm_points, lm_normals, lm_tangents = torus_texels(MAJOR, MINOR, lightmap_size)
     surface = Surface(lm_points, lm_normals, lm_tangents, np.ones(lightmap_size, bool))
