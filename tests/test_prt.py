@@ -322,3 +322,31 @@ def test_prt_per_texel_without_a_light_map_uv_set_is_refused():
     obj = SceneObject(uv_sphere(0.05, 8, 16), Material(KD, KS0, 80.0))
     with pytest.raises(ArsimError, match="PRT per texel needs the object's light-map UV set"):
         object_transfer(obj, PrtSettings("gs", per_texel=True), None, "")
+
+
+def test_gl_cpca_summed_per_vertex_equals_the_uncompressed_matrices_it_stands_for(gl, maps):  # noqa: F811
+    """CPCA per vertex: the GPU sums the clusters' coefficients with each vertex's weights; the image equals
+    (within 1e-3 relative) the one drawn from the matrices the compression stands for, uncompressed."""
+    import dataclasses
+
+    from tests.test_render import render
+
+    rng = np.random.default_rng(13)
+    v = prt.get_variant("sep-c")
+    mesh = uv_sphere(0.1)
+    matrices, _ = linear_in_position(v, mesh.positions.astype(np.float64) + [0.0, 0.1, 0.0], rng)
+    compressed = prt.compress(matrices, clusters=8, vectors=2)
+    assert np.abs(compressed.matrices() - matrices).max() > 1e-4  # (lossy: the test is of the sum, not of a copy)
+    light = np.zeros((9, 3))
+    light[0] = [3.0, 2.5, 2.0]
+    light[1:] = rng.uniform(-0.2, 0.2, (8, 3))
+    material = Material(KD, KS0, 80.0, normal_map=bumps(), prt_variant="sep-c", prt_matrices=matrices,
+                        prt_compressed=compressed, prt_light=light)
+    images = []
+    for m in (material, dataclasses.replace(material, prt_matrices=compressed.matrices().astype(np.float32), prt_compressed=None)):
+        r = render(gl, maps, m)
+        images.append((r.read_hdr(), r.read_mask() > 0.5))
+    (a, mask), (b, _) = images
+    assert 0.03 < mask.mean() < 0.5
+    rel = np.abs(a[mask] - b[mask]) / np.abs(b[mask])
+    assert rel.max() < 1e-3, rel.max()

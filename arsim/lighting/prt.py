@@ -341,13 +341,17 @@ class Compressed:
     labels: np.ndarray  # (P,)
     weights: np.ndarray  # (P, N) float32
 
+    def cluster_coefficients(self, light: np.ndarray) -> np.ndarray:
+        """(clusters, 1 + N, count, 3): each cluster's mean and principal matrices times the light, all a
+        frame computes on the CPU where the GPU sums them per vertex (the renderer's PRT_CPCA)."""
+        stacked = np.concatenate([self.means[:, None], self.vectors], axis=1).astype(np.float32)
+        c, n1, count, l2 = stacked.shape
+        return (stacked.reshape(-1, l2) @ np.asarray(light, dtype=np.float32)).reshape(c, n1, count, 3)
+
     def relight(self, light: np.ndarray) -> np.ndarray:
-        light = np.asarray(light, dtype=np.float32)
-        base = self.means.astype(np.float32) @ light  # (clusters, count, 3)
-        pcs = self.vectors.astype(np.float32) @ light  # (clusters, N, count, 3)
-        out = base[self.labels]
-        per = pcs[self.labels]  # (P, N, count, 3)
-        return out + np.einsum("pn,pnkc->pkc", self.weights, per, optimize=True)
+        """(P, count, 3): every point's coefficients (the per-point sum done here; the reference of the GPU's)."""
+        per = self.cluster_coefficients(light)[self.labels]  # (P, 1 + N, count, 3)
+        return per[:, 0] + np.einsum("pn,pnkc->pkc", self.weights, per[:, 1:], optimize=True)
 
     def matrices(self) -> np.ndarray:
         """(P, count, L2) the matrices as compressed (for the error)."""
@@ -363,9 +367,10 @@ def compress(matrices: np.ndarray, clusters: int = 64, vectors: int = 4, seed: i
     p, count, l2 = matrices.shape
     flat = matrices.reshape(p, -1).astype(np.float64)
     clusters = max(1, min(clusters, p))
-    _, labels = kmeans2(flat, clusters, minit="++", seed=seed)
+    _, labels = kmeans2(flat, clusters, minit="points", seed=seed)  # (SciPy's "++" start takes minutes here)
     dim = flat.shape[1]
     vectors = min(vectors, dim)
+    squared = np.sum(flat * flat, axis=1)
     for _ in range(rounds):
         means = np.zeros((clusters, dim))
         bases = np.zeros((clusters, vectors, dim))
@@ -376,12 +381,12 @@ def compress(matrices: np.ndarray, clusters: int = 64, vectors: int = 4, seed: i
             means[k] = members.mean(axis=0)
             _, _, vt = np.linalg.svd(members - means[k], full_matrices=False)
             bases[k, :len(vt[:vectors])] = vt[:vectors]
-        # reconstruction error of every point under every cluster, its best cluster taken
-        errors = np.empty((p, clusters))
-        for k in range(clusters):
-            diff = flat - means[k]
-            coords = diff @ bases[k].T
-            errors[:, k] = np.sum(diff * diff, axis=1) - np.sum(coords * coords, axis=1)
+        # every point's reconstruction error under every cluster, |x - m|^2 - |B (x - m)|^2, by two products
+        # over all clusters at once (the basis rows orthonormal); each point to its best cluster
+        along_mean = flat @ means.T  # (P, K)
+        projected = (flat @ bases.reshape(-1, dim).T).reshape(p, clusters, vectors)
+        projected -= np.einsum("knd,kd->kn", bases, means)[None]
+        errors = squared[:, None] - 2 * along_mean + np.sum(means * means, axis=1)[None] - np.sum(projected ** 2, axis=2)
         labels = np.argmin(errors, axis=1)
     weights = np.einsum("pd,pnd->pn", flat - means[labels], bases[labels])
     return Compressed(means.reshape(clusters, count, l2), bases.reshape(clusters, vectors, count, l2), labels,

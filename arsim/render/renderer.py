@@ -361,6 +361,8 @@ class Renderer:
             raise ArsimError(f"the compressed prt-{variant.name} transfer has {shape[0]} coefficients, not {variant.count}")
         basis = {"gs": "SH", "hl2": "HL2", "sal": "HSH"}.get(variant.name, "SEP")
         defines = defines + ["INM", "PRT", f"BASIS_{basis}", f"BASIS_COUNT {variant.count}"]
+        if matrices.ndim == 3 and m.prt_compressed is not None:  # CPCA summed per vertex on the GPU
+            defines += ["PRT_CPCA", f"PRT_VECTORS {m.prt_compressed.vectors.shape[1]}"]
         return defines + (["PRT_VERTEX"] if matrices.ndim == 3 else []), variant.count
 
     def _prt_targets(self, obj: SceneObject) -> tuple[object, dict]:
@@ -380,6 +382,11 @@ class Renderer:
             if len(m.prt_matrices) != len(obj.mesh.positions):
                 raise ArsimError(f"the PRT transfer has {len(m.prt_matrices)} vertices, the mesh {len(obj.mesh.positions)}; "
                                  f"compute it for this mesh")
+            c = m.prt_compressed
+            if c is not None:  # per vertex its cluster and weights, static; per frame the clusters' coefficients
+                static = np.hstack([c.labels[:, None].astype(np.float32), c.weights.astype(np.float32)])
+                table = self.ctx.buffer(reserve=c.means.shape[0] * (1 + c.vectors.shape[1]) * variant.count * 3 * 4)
+                return (table, self.ctx.buffer(np.ascontiguousarray(static).tobytes())), textures
             return self.ctx.buffer(reserve=len(m.prt_matrices) * variant.count * 3 * 4), textures
         h, w = m.prt_matrices.shape[:2]
         texture = self._coefficient_texture(np.zeros((h, w, variant.count, 3), np.float32))
@@ -401,6 +408,9 @@ class Renderer:
         order2 = (m.prt_compressed.means if m.prt_compressed is not None else m.prt_matrices).shape[-1]
         if np.shape(light) != (order2, 3):
             raise ArsimError(f"the light has {np.shape(light)} SH coefficients; this PRT object needs ({order2}, 3)")
+        if m.prt_matrices.ndim == 3 and m.prt_compressed is not None:
+            target[0].write(np.ascontiguousarray(m.prt_compressed.cluster_coefficients(light)).tobytes())
+            return
         coefficients = (m.prt_compressed.relight(light) if m.prt_compressed is not None
                         else relight(m.prt_matrices.reshape(-1, *m.prt_matrices.shape[-2:]), light))
         if m.prt_matrices.ndim == 3:
@@ -534,7 +544,8 @@ class Renderer:
             for unit, tex in enumerate(d.units):
                 tex.use(unit)
             if d.prt is not None and d.prt[0].prt_matrices.ndim == 3:
-                d.prt[1].bind_to_storage_buffer(0)
+                for binding, buffer in enumerate(d.prt[1] if isinstance(d.prt[1], tuple) else (d.prt[1],)):
+                    buffer.bind_to_storage_buffer(binding)
             # The light and normal maps' mip level per object and frame, log2 of texels per pixel where it is
             # nearest: llvmpipe's per-pixel level (derivatives, two levels) took 40 % of the torus's time.
             for name, length in d.texel_world.items():

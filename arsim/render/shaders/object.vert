@@ -18,7 +18,12 @@ out vec2 v_uv2;
 #ifdef PRT_VERTEX
 // Precomputed radiance transfer per vertex: the coefficients Renderer.relight wrote, (count, 3) per vertex
 // in the mesh's order, interpolated to the fragments like any vertex value (the spec's section 4).
+// With PRT_CPCA the transfer is clustered (Sloan 2003): prt holds per cluster its mean's and its
+// PRT_VECTORS principal matrices' coefficients, and prt_weights per vertex its cluster and weights.
 layout(std430, binding = 0) readonly buffer PrtCoefficients { float prt[]; };
+#ifdef PRT_CPCA
+layout(std430, binding = 1) readonly buffer PrtWeights { float prt_weights[]; };
+#endif
 out vec3 v_prt[BASIS_COUNT];
 #endif
 
@@ -31,9 +36,24 @@ void main() {
     v_uv2 = in_uv2;
     gl_Position = view_projection * world;
 #ifdef PRT_VERTEX
+#ifdef PRT_CPCA
+    int w = gl_VertexID * (PRT_VECTORS + 1);
+    int cluster = int(prt_weights[w]);
+    int stride = BASIS_COUNT * 3;
+    for (int k = 0; k < BASIS_COUNT; k++) {
+        int i = cluster * (PRT_VECTORS + 1) * stride + k * 3;
+        vec3 c = vec3(prt[i], prt[i + 1], prt[i + 2]);
+        for (int j = 1; j <= PRT_VECTORS; j++) {
+            int q = i + j * stride;
+            c += prt_weights[w + j] * vec3(prt[q], prt[q + 1], prt[q + 2]);
+        }
+        v_prt[k] = c;
+    }
+#else
     for (int k = 0; k < BASIS_COUNT; k++) {
         int i = (gl_VertexID * BASIS_COUNT + k) * 3;
         v_prt[k] = vec3(prt[i], prt[i + 1], prt[i + 2]);
     }
+#endif
 #endif
 }
