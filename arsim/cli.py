@@ -219,6 +219,12 @@ def cmd_capture(args: argparse.Namespace) -> int:
 # arsim render
 
 
+def _check_growing(r, light_given: bool) -> None:
+    if light_given and r.prt_light == "growing":
+        raise ArsimError('[render] prt_light = "growing" replays the probe as the capture grew; give no --env or --maps '
+                         '(a light given whole did not grow), or set prt_light = "final"')
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from arsim.lighting.bake_output import read_bake
     from arsim.render.content import scene_objects
@@ -233,6 +239,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     method, map_size = args.method or r.method, args.map_size or r.map_size
     if args.env is not None and args.maps:
         raise ArsimError("--env and --maps both give the light: pass one of them")
+    _check_growing(r, args.env is not None or bool(args.maps))
     objects = scene_objects(r)  # a mesh that cannot be read fails here, before any work
     maps = None
     if args.maps:  # maps baked before (`arsim bake`), one folder per method
@@ -296,6 +303,7 @@ def cmd_profile(args: argparse.Namespace) -> int:
     bakes = [BakeSettings(method, tile) for tile in policies]
     for b in bakes:
         b.check(map_size)  # a tile that does not divide the maps fails here, before any work
+    _check_growing(r, args.env is not None)
     objects = scene_objects(r)
     probe = _probe(args.env, map_size) if args.env is not None else None  # read early: a bad file fails first
     with _output(args, _scenario_file(args.scenario), args.env) as work:

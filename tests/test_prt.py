@@ -350,3 +350,42 @@ def test_gl_cpca_summed_per_vertex_equals_the_uncompressed_matrices_it_stands_fo
     assert 0.03 < mask.mean() < 0.5
     rel = np.abs(a[mask] - b[mask]) / np.abs(b[mask])
     assert rel.max() < 1e-3, rel.max()
+
+
+def test_the_render_loop_relights_prt_objects_as_the_probe_grows(gl, maps):  # noqa: F811
+    """A FrameLoop replaying three lights over six frames: the step "relight" runs in frames 0, 2 and 4 only
+    (and the profile's trace shows it), and the object's coefficients are then the last light's (read back
+    from the GPU's buffer)."""
+    from arsim.render.loop import FrameLoop
+    from arsim.render.renderer import Renderer, SceneObject
+    from arsim.tracking.apriltag import TagPose
+    from tests.test_render import CAMERA
+
+    rng = np.random.default_rng(14)
+    mesh = uv_sphere(0.05, 6, 12)
+    matrices = rng.uniform(0.0, 1.0, (len(mesh.positions), 9, 9)).astype(np.float32)
+    renderer = Renderer(CAMERA, maps, gl)
+    renderer.add(SceneObject(mesh, Material(KD, KS0, 80.0, prt_variant="gs", prt_matrices=matrices)))
+    lights = [environment(16) * s for s in (0.2, 0.6, 1.0)]
+    lost = TagPose(None, None, None)
+    loop = FrameLoop(gl, None, renderer, pose_cache={k: lost for k in range(6)}, lights=lights, light_frames=6)
+    frame = np.zeros((CAMERA.height, CAMERA.width, 3), np.uint8)
+    records = [loop.run(frame, k)[1] for k in range(6)]
+    assert ["relight" in r.cpu_ms for r in records] == [True, False, True, False, True, False]
+    from arsim.evaluate.profile import ProfileRun  # the profile's trace has the step on a track of its own
+
+    events = [e for e in ProfileRun("t", "accurate", 33.3, records).trace()["traceEvents"] if e.get("name") == "relight"]
+    assert len(events) == 3
+    buffer = renderer.objects[0].prt[1]
+    got = np.frombuffer(buffer.read(), np.float32).reshape(len(mesh.positions), 9, 3)
+    np.testing.assert_allclose(got, prt.relight(matrices, prt.light_sh(lights[-1], 3)), rtol=1e-5, atol=1e-6)
+
+
+def test_a_growing_probe_is_refused_with_a_light_given_whole(tmp_path):
+    from tests.test_cli import arsim, assert_one_line_error
+
+    path = tmp_path / "grow.toml"
+    path.write_text('[render]\nprt_light = "growing"\n[[render.objects]]\nkind = "torus"\nlighting = "prt-gs"\n')
+    env = __import__("pathlib").Path(__file__).resolve().parents[1] / "assets" / "envmaps" / "city.exr"
+    assert_one_line_error(arsim("render", path, "-o", tmp_path / "out", "--env", env), 'prt_light = "growing"')
+    assert not (tmp_path / "out").exists()

@@ -6,8 +6,9 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -17,6 +18,7 @@ from arsim.capture.direct import DirectImages
 from arsim.capture.drift import DriftFilter
 from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
 from arsim.capture.response import RecoveredResponse, calibrate_response
+from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.errors import ArsimError
 from arsim.core.png import read_frame
 from arsim.scenario import Scenario
@@ -56,6 +58,9 @@ class CaptureResult:
     gyro_bias: tuple[np.ndarray, np.ndarray]  # the online pass's estimate of the gyroscope's residual bias
     # (device axes, rad/s) and its standard deviations
     refinement: Refinement | None = None
+    # The probe as it grew: (sweep time s, SNAPSHOT_SIZE² angle map) about once a second of the final pass
+    # (black where nothing was seen yet); what an app relighting as it captures would have had.
+    snapshots: list = field(default_factory=list)
 
     @property
     def frames_per_second(self) -> float:
@@ -115,11 +120,31 @@ def exposure_scales(rec: Recording, sensor: SensorSettings) -> list[float]:
     return [f["exposure_ns"] / 1e9 * f["iso"] / sensor.base_iso * sensor.sensitivity for f in rec.frames]
 
 
+SNAPSHOT_SIZE = 32  # the growing probe's snapshots (SH to band 9 need no more)
+
+
+def probe_snapshot(accumulator: ProbeAccumulator, size: int = SNAPSHOT_SIZE) -> np.ndarray:
+    """The probe captured so far as a small angle map: the disk's texels area-averaged (the rim's partial
+    texels over their share of the disk), 0 where nothing was seen."""
+    probe = accumulator.probe()
+    disk = anglemap_disk_mask(probe.shape[0]).astype(np.float32)
+    total = cv2.resize(probe * disk[..., None], (size, size), interpolation=cv2.INTER_AREA)
+    share = cv2.resize(disk, (size, size), interpolation=cv2.INTER_AREA)[..., None]
+    return np.where(share > 0, total / np.maximum(share, 1e-12), 0.0) * anglemap_disk_mask(size)[..., None]
+
+
+def _second_ends(times: np.ndarray, k: int) -> bool:
+    """Whether frame k is the last of a whole second of the sweep (times from its start), or the last one."""
+    return k == len(times) - 1 or int(times[k] - times[0]) < int(times[k + 1] - times[0])
+
+
 def accumulate_frames(rec: Recording, orientations: Rotation, response: RecoveredResponse, size: int,
-                      progress: Callable[[float, float], None] = lambda fraction, coverage: None) -> ProbeAccumulator:
+                      progress: Callable[[float, float], None] = lambda fraction, coverage: None,
+                      snapshots: list | None = None) -> ProbeAccumulator:
     """Every frame of the recording accumulated into a size x size angle map at the given camera-to-world
     orientations (K,), linearised with the response: the refined pass, or (true orientations, true
-    response) the ideal merge that bounds what any capture of the same frames can do."""
+    response) the ideal merge that bounds what any capture of the same frames can do. snapshots: a list
+    that gets (time s, probe_snapshot) about once a second and at the end."""
     scenario = recording_scenario(rec)
     bracket = scenario.capture.bracket_ev
     sensor = SensorSettings.of(scenario.device.camera)
@@ -127,10 +152,13 @@ def accumulate_frames(rec: Recording, orientations: Rotation, response: Recovere
     levels = sorted(set(bracket), reverse=True)
     accumulator = new_accumulator(size, camera, vignette(camera.height, camera.width, sensor.vignetting), sensor, len(levels))
     files, scales, gain = [rec.folder / f["file"] for f in rec.frames], exposure_scales(rec, sensor), gains(rec, sensor)
+    times = np.array([f["t_ns"] for f in rec.frames]) / 1e9
     with ThreadPoolExecutor(2) as readers:
         for k, codes in enumerate(readers.map(read_frame, files)):
             accumulator.add(codes, response.linear / scales[k], orientations[k].as_matrix(), scales[k],
                             levels.index(bracket[k % len(bracket)]), gain[k])
+            if snapshots is not None and _second_ends(times, k):
+                snapshots.append((float(times[k] - times[0]), probe_snapshot(accumulator)))
             if k % 30 == 0 or k == len(rec.frames) - 1:
                 progress((k + 1) / len(rec.frames), accumulator.coverage())
     return accumulator
@@ -162,6 +190,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
                         scenario.capture.fusion == "rotation-vector", settings.size)
     start = time.perf_counter()
     any_unclipped = False
+    final_online, online_snapshots = not settings.refine or not settings.align_every, []
     features = KeyframeFeatures(camera)
     metered_small: dict[int, np.ndarray] = {}  # what the refinement's keyframes are taken from
     files = [rec.folder / f["file"] for f in rec.frames]
@@ -186,6 +215,8 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
             corrected.append(predicted)
             accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale,
                             exposure_levels.index(bracket[index]), gain[k])
+            if final_online and _second_ends(times, k):  # (the online probe is the final one: its growth kept)
+                online_snapshots.append((float(times[k] - times[0]), probe_snapshot(accumulator)))
             if k % 30 == 0 or k == len(rec.frames) - 1:
                 progress((k + 1) / len(rec.frames) * (0.6 if settings.refine else 1.0), accumulator.coverage())
     if not any_unclipped:
@@ -197,7 +228,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     gyro_bias = (mount @ bias, np.sqrt(mount**2 @ bias_sigma**2))
     if not settings.refine or not settings.align_every:
         return CaptureResult(accumulator, response, times, truth, uncorrected, online, online, aligned,
-                             seconds_online, seconds_online, gyro_bias)
+                             seconds_online, seconds_online, gyro_bias, snapshots=online_snapshots)
     # The refined pass: every keyframe orientation at once, then the frames accumulated again with them.
     gyro = rec.imu["gyroscope"]
     refinement = refine(times, np.array(sorted(metered_small)), uncorrected, metered_small.__getitem__,
@@ -207,7 +238,8 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     # with no keyframe pair the refinement has only the IMU's orientations: the online pass's, with the bias its
     # filter learnt from whatever it aligned, are no worse
     final = refinement.orientations if refinement.loop_closures else online
+    snapshots = []
     accumulator = accumulate_frames(rec, final, response, settings.size,
-                                    lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage))
+                                    lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage), snapshots)
     return CaptureResult(accumulator, response, times, truth, uncorrected, final, online, aligned,
-                         time.perf_counter() - start, seconds_online, gyro_bias, refinement)
+                         time.perf_counter() - start, seconds_online, gyro_bias, refinement, snapshots)

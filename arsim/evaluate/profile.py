@@ -17,9 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from arsim.core.files import atomic_path, json_text, write_text_atomic
-from arsim.render.loop import FrameRecord
+from arsim.render.loop import FRAME_STEPS, FrameRecord  # (the render thread's steps 3-7, PRT's relight among them)
 
-FRAME_STEPS = ("bake", "background", "objects", "tone_mapping", "overlay")  # the render thread: steps 3-7
 TRACKS = ("frame",) + FRAME_STEPS + ("track",)
 PERCENTILES = (50, 95, 99)
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import io
 import os
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
@@ -367,7 +368,9 @@ def compress(matrices: np.ndarray, clusters: int = 64, vectors: int = 4, seed: i
     p, count, l2 = matrices.shape
     flat = matrices.reshape(p, -1).astype(np.float64)
     clusters = max(1, min(clusters, p))
-    _, labels = kmeans2(flat, clusters, minit="points", seed=seed)  # (SciPy's "++" start takes minutes here)
+    with warnings.catch_warnings():  # (a cluster left empty is refilled by the reassignment below)
+        warnings.simplefilter("ignore", UserWarning)
+        _, labels = kmeans2(flat, clusters, minit="points", seed=seed)  # (SciPy's "++" start takes minutes here)
     dim = flat.shape[1]
     vectors = min(vectors, dim)
     squared = np.sum(flat * flat, axis=1)

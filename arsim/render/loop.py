@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,6 +19,9 @@ from arsim.render.renderer import Renderer
 from arsim.tracking.apriltag import TagPose, TagTracker
 
 GL_STEPS = ("bake", "background", "objects", "tone_mapping", "overlay")
+# The render thread's steps (3-7; steps 1-2, the tracker, run on the camera's): "relight" is PRT's, the
+# objects' coefficients recomputed from the light when it changes (CPU and an upload, no draw).
+FRAME_STEPS = ("bake", "relight", "background", "objects", "tone_mapping", "overlay")
 # The share of the budget the bake leaves free: the other steps' time varies from frame to frame (objects
 # coming closer) and so does the bake's. Over 3000 frames of bake_512: 0.05 kept 98.9 % of frames within
 # budget, 0.12 kept 99.5 %.
@@ -57,7 +60,7 @@ class FrameLoop:
 
     def __init__(self, ctx, tracker: TagTracker, renderer: Renderer, shading: Shading = Shading(), overlay: bool = False,
                  maps_label: str = "", baker: LoopBaker | None = None, budget_ms: float = 33.3,
-                 pose_cache: dict[int, TagPose] | None = None):
+                 pose_cache: dict[int, TagPose] | None = None, lights: Sequence[np.ndarray] = (), light_frames: int = 1):
         self.ctx, self.tracker, self.renderer, self.shading = ctx, tracker, renderer, shading
         self.pose_cache = pose_cache  # a recording's frames seen again (a loop over its path): their poses
         self.overlay, self.maps_label, self.baker, self.budget_ms = overlay, maps_label, baker, budget_ms
@@ -68,6 +71,9 @@ class FrameLoop:
         # no object, and the two alternate when the tag is lost and found again.
         self.recent_rest = {found: deque(maxlen=REST_FRAMES) for found in (False, True)}
         self.baked_in_use = False
+        # The growing probe replayed over light_frames frames (angle maps, the capture's snapshots): the PRT
+        # objects relit from each in turn (step "relight"), as an app relighting while it captures.
+        self.lights, self.light_frames, self.frames_run, self.light_index = list(lights), max(light_frames, 1), 0, -1
 
     def _timed(self, record: FrameRecord, name: str, work: Callable[[], None], gl: bool = True) -> None:
         self.ctx.finish()
@@ -141,6 +147,12 @@ class FrameLoop:
             record.bake_progress = self.baker.progress
             record.bake_work_progress = self.baker.work_progress
         r = self.renderer
+        if self.lights:
+            index = min(self.frames_run * len(self.lights) // self.light_frames, len(self.lights) - 1)
+            if index != self.light_index:
+                self._timed(record, "relight", lambda: r.relight_probe(self.lights[index]), gl=False)
+                self.light_index = index
+        self.frames_run += 1
         self._timed(record, "background", lambda: r.background_pass(frame))
         if pose.found:  # lost frames draw no object (as the thesis's app)
             rotation = Rotation.from_matrix(pose.rotation)
@@ -152,7 +164,7 @@ class FrameLoop:
             lines = [f"frame {index}  {self.last_frame_ms:5.1f} ms", self.status_line(pose.found)]
             baking = self.baker is not None and not self.baked_in_use
             self._timed(record, "overlay", lambda: r.overlay_pass(lines, self.baker.thumbnail if baking else None))
-        self.recent_rest[pose.found].append(sum(record.cpu_ms.get(name, 0.0) for name in GL_STEPS if name != "bake"))
+        self.recent_rest[pose.found].append(sum(record.cpu_ms.get(name, 0.0) for name in FRAME_STEPS if name != "bake"))
         self.last_frame_ms = record.total_ms
         return pose, record
 

@@ -401,6 +401,19 @@ class Renderer:
             if d.prt is not None:
                 self._relight(d, light)
 
+    def relight_probe(self, anglemap: np.ndarray) -> None:
+        """Relight every PRT object from an angle-map light: its SH to each object's order, then relight."""
+        from arsim.lighting.prt import light_sh
+
+        lights = {}
+        for d in self.objects:
+            if d.prt is not None:
+                m = d.prt[0]
+                order = int(round(np.sqrt((m.prt_compressed.means if m.prt_compressed is not None else m.prt_matrices).shape[-1])))
+                if order not in lights:
+                    lights[order] = light_sh(anglemap, order)
+                self._relight(d, lights[order])
+
     def _relight(self, d: _Drawable, light: np.ndarray) -> None:
         from arsim.lighting.prt import relight
 

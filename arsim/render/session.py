@@ -31,7 +31,7 @@ from arsim.sensors.frames import recording_camera
 from arsim.sensors.recording import Recording
 from arsim.tracking.apriltag import TagPose, TagTracker
 
-STEPS = ("track", "background", "objects", "tone_mapping", "overlay", "readback", "truth_frame")
+STEPS = ("track", "relight", "background", "objects", "tone_mapping", "overlay", "readback", "truth_frame")
 
 
 @dataclass(frozen=True)
@@ -44,6 +44,9 @@ class SessionSettings:
     every: int = 1  # render every k-th frame of the AR path (a quick look; the video holds those frames)
     overlay: bool = False  # step 7: frame time and map state drawn at the top left (left out of the FLIP)
     flip_every: int = 1  # the truth frame and its FLIP on every k-th rendered frame (and on the saved ones)
+    # The probe as the capture grew (angle maps, CaptureResult.snapshots), replayed over the session: PRT objects
+    # relit from each in turn (the truth frames keep the true light); empty: relit once, from the final probe.
+    lights: tuple = ()
 
 
 Scorer = Callable[[np.ndarray, np.ndarray, np.ndarray], float]  # (truth frame, frame, mask) -> score inside the mask
@@ -122,7 +125,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     poses, flips, records = [], np.full(count, np.nan), []
     fps = rec.meta["camera"].get("fps", 30.0) / settings.every
     shading = Shading(settings.key, settings.white, settings.log_average)
-    loop = FrameLoop(ctx, tracker, captured, shading, settings.overlay, settings.method)
+    loop = FrameLoop(ctx, tracker, captured, shading, settings.overlay, settings.method, lights=settings.lights,
+                     light_frames=count)
     with atomic_path(out_dir / "session.mp4") as video_path:
         video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
         for n, k in enumerate(indices):
@@ -192,7 +196,8 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
     renderer = _renderer(camera, session_maps(probe, needed), ctx, settings.method, light_objects(objects, probe))
     baker = LoopBaker(probe, needed[settings.method], bake_settings, ctx)
     loop = FrameLoop(ctx, tracker, renderer, Shading(settings.key, settings.white, settings.log_average), settings.overlay,
-                     settings.method, baker, budget_ms, pose_cache={} if poses is None else poses)
+                     settings.method, baker, budget_ms, pose_cache={} if poses is None else poses, lights=settings.lights,
+                     light_frames=len(rec.frames))
     marks = [0.25, 0.5, 1.0]
     if out_dir is not None:
         (out_dir / "frames").mkdir(parents=True, exist_ok=True)

@@ -19,6 +19,7 @@ import numpy as np
 from arsim.capture.accumulate import filled
 from arsim.capture.pipeline import CaptureResult, CaptureSettings, burst_response, capture, recording_scenario
 from arsim.capture.response import response_error
+from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
 from arsim.core.progress import quiet_stage
 from arsim.core.resample import to_layout
@@ -99,15 +100,26 @@ def session_inputs(scenario: Scenario, out: Path, probe: np.ndarray | None, map_
                    stage: Stage = quiet_stage):
     """What an AR session needs: the scenario recorded into out/recording, its AR part, the light probe
     (`probe` where given, else captured from the sweep; None when not wanted) as a map_size angle map, and
-    the camera's response (from the capture, or from the sweep's burst)."""
+    the camera's response (from the capture, or from the sweep's burst), and the probe as it grew (the
+    capture's snapshots; empty where none was captured)."""
     with stage("recording the sweep and the AR path") as update:
         record(scenario, out / "recording", progress=lambda f: update(completed=f))
     sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
     if probe is None and capture_probe:
         with stage("capturing the light probe") as update:
             result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
-        return ar, session_probe(result, map_size), result.response
-    return ar, probe, burst_response(sweep, SensorSettings.of(scenario.device.camera))
+        return ar, session_probe(result, map_size), result.response, [light for _, light in result.snapshots]
+    return ar, probe, burst_response(sweep, SensorSettings.of(scenario.device.camera)), []
+
+
+def growing_lights(settings: SessionSettings, scenario: Scenario, snapshots: list) -> SessionSettings:
+    """The session's settings with the growing probe to replay where [render] prt_light = "growing"."""
+    if scenario.render.prt_light != "growing":
+        return settings
+    if not snapshots:
+        raise ArsimError('[render] prt_light = "growing" replays the probe as the capture grew; give no --env '
+                         '(a probe given whole did not grow), or set prt_light = "final"')
+    return dataclasses.replace(settings, lights=tuple(snapshots))
 
 
 def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map_size: int, probe: np.ndarray | None = None,
@@ -120,7 +132,8 @@ def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map
     needed = maps_needed(objects, settings.method)
     if maps is not None:
         check_maps(maps, needed)
-    ar, probe, response = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None, stage=stage)
+    ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None, stage=stage)
+    settings = growing_lights(settings, scenario, growing)
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
     with stage(f"computing the maps ({', '.join(needed)})"):
         maps = maps if maps is not None else session_maps(probe, needed, source)
@@ -143,8 +156,8 @@ def profile_session(scenario: Scenario, out: Path, bakes: Sequence[BakeSettings]
         b.check(map_size)  # a tile that does not divide the maps fails here, before any work
     r = scenario.render
     objects = scene_objects(r) if objects is None else objects
-    ar, probe, response = session_inputs(scenario, out, probe, map_size, stage=stage)
-    settings = SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True)
+    ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, stage=stage)
+    settings = growing_lights(SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True), scenario, growing)
     runs, poses = [], {}
     for b in bakes:
         with stage(f"baking {b.method} maps in the loop, tile {b.label}") as update:

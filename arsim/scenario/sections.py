@@ -262,6 +262,10 @@ class RenderSection:
     flip_every: int = setting(4, min=1, max=10000,
                               help="the truth frame and its FLIP on every k-th frame (FLIP costs about 1 s of CPU "
                                    "for a whole 640 x 480 frame; 1: every frame)")
+    prt_light: str = setting("final", choices=("final", "growing"),
+                             help="objects lit by PRT: relit once from the final probe, or (growing) from the probe as the "
+                                  "capture grew, about a second of the sweep at a time, replayed over the AR session "
+                                  "(step \"relight\" of the profile)")
     methods: tuple[str, ...] = setting((), choices=MAP_METHODS,
                                        help="arsim run: map methods baked and measured besides those the objects use")
     objects: tuple[RenderObjectSection, ...] = subsection(
