@@ -240,7 +240,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.env is not None and args.maps:
         raise ArsimError("--env and --maps both give the light: pass one of them")
     _check_growing(r, args.env is not None or bool(args.maps))
-    objects = scene_objects(r)  # a mesh that cannot be read fails here, before any work
+    objects = scene_objects(r, scenario.ar.table_albedo)  # a mesh that cannot be read fails here, before any work
     maps = None
     if args.maps:  # maps baked before (`arsim bake`), one folder per method
         maps = {}
@@ -304,7 +304,7 @@ def cmd_profile(args: argparse.Namespace) -> int:
     for b in bakes:
         b.check(map_size)  # a tile that does not divide the maps fails here, before any work
     _check_growing(r, args.env is not None)
-    objects = scene_objects(r)
+    objects = scene_objects(r, scenario.ar.table_albedo)
     probe = _probe(args.env, map_size) if args.env is not None else None  # read early: a bad file fails first
     with _output(args, _scenario_file(args.scenario), args.env) as work:
         runs = profile_session(scenario, work, bakes, budget, args.max_frames or pr.max_frames, map_size, probe, _bar, objects)
@@ -626,7 +626,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     recording_segments(scenario)
     read_environment(scenario.environment)  # a PNG renamed .exr, a truncated file, NaN texels: refused as record would
-    scene_objects(scenario.render)  # a mesh that cannot be read: refused as render would
+    scene_objects(scenario.render, scenario.ar.table_albedo)  # a mesh that cannot be read: refused as render would
     print(f"# {args.scenario or DEFAULT_SCENARIO}: valid; as resolved:")
     print(scenario_to_toml(scenario), end="")
     return 0

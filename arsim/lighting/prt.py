@@ -31,6 +31,7 @@ from math import sqrt
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse
 import scipy.special
 
 from arsim.core.errors import ArsimError
@@ -117,14 +118,24 @@ def local_sh9_rotation(tangents: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return np.einsum("pks,kr->psr", sh9(local) * w[None, :, None], sh9(d))
 
 
+# The light a hit point sends back along a ray, as a transfer vector (N, order^2) of the distant light:
+# bounce(hit points (N, 3), ray directions (N, 3)) = albedo / pi x the shadowed diffuse transfer there.
+Bounce = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
 def compute_transfer(points: np.ndarray, normals: np.ndarray, tangents: np.ndarray, order: int = DEFAULT_ORDER,
                      blocked: Blocked | None = None, samples: int = 2048, chunk: int = 256,
-                     progress: Callable[[int], None] | None = None) -> Transfer:
+                     progress: Callable[[int], None] | None = None, distance: Blocked | None = None,
+                     bounce: Bounce | None = None) -> Transfer:
     """Transfer of points (P, 3) with unit normals and tangents (P, 3): the light arriving from each of
     about `samples` directions, dropped below the point's tangent plane (the surface hides it) and where
     blocked(...) says a ray hits the scene; integrated against the light's SH (world) and the local
-    quadratic SH. progress(n) is called with the points done."""
+    quadratic SH. With bounce (and distance(...), how far each ray's hit is, inf for none, in place of
+    blocked), one bounce of interreflection (Sloan 2002): a ray that hits the scene brings what its hit
+    point sends back, bounce(hit, direction). progress(n) is called with the points done."""
     check_order(order)
+    if bounce is not None:
+        chunk = min(chunk, 64)  # (the hits' transfer vectors are held per chunk)
     points, normals, tangents = (np.asarray(a, dtype=np.float64).reshape(-1, 3) for a in (points, normals, tangents))
     d, w = transfer_rule(samples)
     ylight = sh_basis(d, order) * w[:, None]  # (K, L2), weighted
@@ -138,11 +149,22 @@ def compute_transfer(points: np.ndarray, normals: np.ndarray, tangents: np.ndarr
         cosine = normals[sl] @ d.T  # (T, K)
         visible = (cosine > 0).astype(np.float64)
         unshadowed[sl] = np.maximum(cosine, 0.0) @ ylight
-        if blocked is not None:
-            rays = np.broadcast_to(d[:, None, :], (len(d), sl.stop - sl.start, 3))
+        rays = np.broadcast_to(d[:, None, :], (len(d), sl.stop - sl.start, 3))
+        if bounce is not None:
+            far = distance(points[sl], rays).T  # (T, K)
+            hit = np.isfinite(far) & (visible > 0)
+            visible *= ~hit
+        elif blocked is not None:
             visible *= ~blocked(points[sl], rays).T
         shadowed[sl] = (np.maximum(cosine, 0.0) * visible) @ ylight
         world = (visible @ products).reshape(-1, 9, l2)  # the visible light's quadratic SH, world axes
+        if bounce is not None and hit.any():
+            t, k = np.nonzero(hit)
+            sent = bounce(points[sl][t] + d[k] * far[t, k][:, None], d[k])  # (N, L2), the light's SH -> radiance
+            # per point, the sum over its hit rays: scatter by point with a sparse (T x N) sum
+            gather = scipy.sparse.csr_matrix((np.ones(len(t)), (t, np.arange(len(t)))), shape=(sl.stop - sl.start, len(t)))
+            shadowed[sl] += gather @ (sent * (np.maximum(cosine[t, k], 0.0) * w[k])[:, None])
+            world += (gather @ ((y9[k] * w[k][:, None])[:, :, None] * sent[:, None, :]).reshape(len(t), -1)).reshape(-1, 9, l2)
         matrices[sl] = rotations[sl] @ world
         if progress is not None:
             progress(sl.stop - sl.start)

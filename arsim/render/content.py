@@ -23,6 +23,9 @@ from arsim.render.mesh_lightmap import lightmap_texels, lightmap_unwrap, ray_cas
 from arsim.render.meshes import Mesh, grid_mesh, load_mesh, uv_sphere
 from arsim.render.renderer import Material, Orbit, SceneObject
 from arsim.render.transfer import PrtSettings, with_transfer
+from arsim.sensors.table import Table
+
+TABLE_ALBEDO = Table.albedo  # (the dataclass's default: the scenario's unless given)
 
 SPHERE_EXPONENTS = (1.0, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0)  # thesis figure 5.3
 
@@ -57,26 +60,27 @@ def scene_distance(p: np.ndarray, major: float, minor: float) -> np.ndarray:
 
 
 def sphere_trace(origins: np.ndarray, directions: np.ndarray, distance, scale: float, reach: float,
-                 steps: int = 96) -> np.ndarray:
+                 steps: int = 96, distances: bool = False) -> np.ndarray:
     """Whether each ray (origins and directions broadcast together, (..., 3)) hits the surface of the
     distance function `distance` within `reach`: sphere tracing, each step the distance to the nearest
-    surface; scale is the scene's small length (the hit and the step floors are fractions of it)."""
+    surface; scale is the scene's small length (the hit and the step floors are fractions of it). With
+    distances, how far along each ray the hit is instead (inf where it hits nothing)."""
     shape = np.broadcast_shapes(origins.shape, directions.shape)
     o = np.broadcast_to(origins, shape).reshape(-1, 3)
     d = np.broadcast_to(directions, shape).reshape(-1, 3)
-    hit = np.zeros(len(o), dtype=bool)
+    hit_at = np.full(len(o), np.inf)
     active = np.arange(len(o))  # the rays still marching (most leave within a few steps: only these step on)
     travelled = np.full(len(o), 1e-3 * scale)
     for _ in range(steps):
         gap = distance(o[active] + d[active] * travelled[:, None])
         touched = gap < 1e-4 * scale
-        hit[active[touched]] = True
+        hit_at[active[touched]] = travelled[touched]
         travelled = travelled + np.maximum(gap, 1e-5 * scale)
         going = ~touched & (travelled <= reach)
         active, travelled = active[going], travelled[going]
         if not len(active):
             break
-    return hit.reshape(shape[:-1])
+    return (hit_at if distances else np.isfinite(hit_at)).reshape(shape[:-1])
 
 
 def torus_texels(major: float, minor: float, size: tuple[int, int]) -> tuple[np.ndarray, ...]:
@@ -237,10 +241,11 @@ def _disc_object(o, x: float, z: float, lighting: ObjectLighting) -> SceneObject
                        lightmap_surface=lambda: disc_texels(o.size_m, o.lightmap_size, offset))
 
 
-def scene_objects(section) -> list[SceneObject]:
+def scene_objects(section, table_albedo: tuple[float, float, float] = TABLE_ALBEDO) -> list[SceneObject]:
     """The scenario's virtual objects ([[render.objects]], a RenderObjectSection each) as SceneObjects; a
     mesh that cannot be read, or a lighting that cannot be, raises ArsimError. Directional light maps
-    (lighting = inm-...) are baked later, from the light: light_objects."""
+    (lighting = inm-...) are baked later, from the light: light_objects. table_albedo: the scenario's [ar]
+    table_albedo (the light the table sends on, for PRT's interreflection)."""
     objects = []
     for o in section.objects:
         x, z = o.position_m
@@ -266,7 +271,8 @@ def scene_objects(section) -> list[SceneObject]:
                 objects[k] = dataclasses.replace(objects[k], orbit=Orbit(o.orbit_m, o.orbit_period_s))
             if lighting.kind == "prt":  # (the transfer is computed by light_objects, with the scene's visibility)
                 material = dataclasses.replace(objects[k].material, prt_variant=lighting.variant, light_map=None)
-                settings = PrtSettings(lighting.variant, o.prt_order, lighting.per_texel, o.prt_samples, o.prt_clusters)
+                settings = PrtSettings(lighting.variant, o.prt_order, lighting.per_texel, o.prt_samples, o.prt_clusters,
+                                       o.prt_bounces, float(np.mean(o.kd)), float(np.mean(table_albedo)))
                 objects[k] = dataclasses.replace(objects[k], material=material, transfer=settings)
     return objects
 
@@ -304,28 +310,44 @@ LIGHT_SIZE = 32  # the light's angle map the directional light maps sum (every t
 VOLUME_GRID = (9, 5, 9)  # grid points of the irradiance volume over the objects' box (x, y, z)
 
 
-def scene_occlusion(objects: list[SceneObject], lit_by_volume: list[bool]):
-    """blocked(origins (T, 3), directions (K, T, 3)) -> (K, T): whether rays hit the table top or an object
-    that stands still and is not lit by the volume (by its distance function or its mesh); and a key of
-    that geometry (the occluders' meshes where they stand) for caches."""
+@dataclass(frozen=True)
+class Occlusion:
+    """The scene's rays: blocked(origins (T, 3), directions (K, T, 3)) -> (K, T) whether each hits the
+    table top or an object that stands still and is not lit by the volume (by its distance function or its
+    mesh); distance(...) the same as how far (inf: nothing); the occluders; a key of that geometry (their
+    meshes where they stand) for caches."""
+
+    blocked: object
+    distance: object
+    occluders: list
+    key: str
+
+
+def scene_occlusion(objects: list[SceneObject], lit_by_volume: list[bool]) -> Occlusion:
+    """The rays of the scene that the objects standing still make with the table (see Occlusion)."""
     occluders = [o for o, moving in zip(objects, lit_by_volume) if not moving and o.orbit is None]
     shapes = [o.distance for o in occluders if o.distance is not None]
     scale = 0.01  # metres: the hit and step floors of the sphere tracing
 
-    def distance(p):
+    def field(p):
         return np.minimum.reduce([p[..., 1]] + [d(p) for d in shapes])
 
     meshes = [(o.mesh, o.model) for o in occluders if o.mesh_occludes]
     cast = ray_caster(meshes) if meshes else None
+    cast_far = ray_caster(meshes, distances=True) if meshes else None
 
     def blocked(origins, directions):
         origins = origins + directions * 2e-5
-        hit = sphere_trace(origins, directions, distance, scale, 2.0)
+        hit = sphere_trace(origins, directions, field, scale, 2.0)
         return hit | cast(origins, directions) if cast is not None else hit
+
+    def distance(origins, directions):
+        far = sphere_trace(origins + directions * 2e-5, directions, field, scale, 2.0, distances=True)
+        return np.minimum(far, cast_far(origins + directions * 2e-5, directions)) + 2e-5 if cast_far is not None else far + 2e-5
 
     key = transfer_key("table y=0", *[a for o in occluders for a in (o.mesh.positions, o.mesh.indices, o.model,
                                                                         o.distance is not None, o.mesh_occludes)])
-    return blocked, key
+    return Occlusion(blocked, distance, occluders, key)
 
 
 def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneObject]:
@@ -338,7 +360,8 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
     lit_by_volume = [o.material.volume_lit for o in objects]
     if not any(inm) and not any(lit_by_volume) and all(o.transfer is None for o in objects):
         return objects
-    blocked, scene_key = scene_occlusion(objects, lit_by_volume)
+    occlusion = scene_occlusion(objects, lit_by_volume)
+    blocked = occlusion.blocked
     directions, weighted = probe_samples(to_layout(light, "anglemap", LIGHT_SIZE))
     volume = None
     if any(lit_by_volume):
@@ -357,7 +380,7 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
         elif moving:
             o = dataclasses.replace(o, material=dataclasses.replace(o.material, irradiance_volume=volume))
         elif o.transfer is not None:
-            o = with_transfer(o, o.transfer, blocked, scene_key, light)
+            o = with_transfer(o, o.transfer, occlusion, light)
         out.append(o)
     return out
 

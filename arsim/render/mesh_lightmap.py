@@ -113,9 +113,10 @@ def lightmap_texels(mesh: Mesh, model: np.ndarray, shape: tuple[int, int]) -> Su
     return Surface(points, normals, tangents, near)
 
 
-def ray_caster(meshes: list[tuple[Mesh, np.ndarray]]):
+def ray_caster(meshes: list[tuple[Mesh, np.ndarray]], distances: bool = False):
     """blocked(origins (T, 3), directions (K, T, 3)) -> (K, T): whether each ray hits any of the meshes,
-    each placed by its model matrix (Embree through trimesh)."""
+    each placed by its model matrix (Embree through trimesh); with distances, how far the first hit is
+    (inf: none)."""
     import trimesh
     from trimesh.ray.ray_pyembree import RayMeshIntersector
 
@@ -130,4 +131,13 @@ def ray_caster(meshes: list[tuple[Mesh, np.ndarray]]):
         hit = intersector.intersects_any(origins.reshape(-1, 3), directions.reshape(-1, 3))
         return np.asarray(hit, dtype=bool).reshape(directions.shape[:-1])
 
-    return blocked
+    def first_hit(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        o, d = np.broadcast_to(origins, directions.shape).reshape(-1, 3), directions.reshape(-1, 3)
+        out = np.full(len(o), np.inf)
+        if len(o):
+            locations, rays, _ = intersector.intersects_location(o, d, multiple_hits=False)
+            if len(rays):
+                out[rays] = np.einsum("ij,ij->i", locations - o[rays], d[rays])
+        return out.reshape(directions.shape[:-1])
+
+    return first_hit if distances else blocked

@@ -128,7 +128,7 @@ def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map
     """The AR session of a scenario into out: recorded, the probe captured (or `probe`), the objects
     (scene_objects of the scenario, unless given) lit by maps from it (or by `maps` baked before), each
     frame scored against its truth frame; metrics.json written; returns the metrics."""
-    objects = scene_objects(scenario.render) if objects is None else objects
+    objects = scene_objects(scenario.render, scenario.ar.table_albedo) if objects is None else objects
     needed = maps_needed(objects, settings.method)
     if maps is not None:
         check_maps(maps, needed)
@@ -155,7 +155,7 @@ def profile_session(scenario: Scenario, out: Path, bakes: Sequence[BakeSettings]
     for b in bakes:
         b.check(map_size)  # a tile that does not divide the maps fails here, before any work
     r = scenario.render
-    objects = scene_objects(r) if objects is None else objects
+    objects = scene_objects(r, scenario.ar.table_albedo) if objects is None else objects
     ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, stage=stage)
     settings = growing_lights(SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True), scenario, growing)
     runs, poses = [], {}

@@ -233,6 +233,9 @@ class RenderObjectSection:
                                "(lightmap_size)")
     prt_samples: int = setting(2048, min=64, max=65536,
                                help="lighting = prt-...: directions per point the transfer integrates over (rays cast)")
+    prt_bounces: int = setting(0, min=0, max=1,
+                               help="lighting = prt-...: 1 adds one bounce of interreflection (the light the objects that "
+                                    "stand still and the table send on, grey: the mean of their k_d and of [ar] table_albedo)")
     prt_clusters: int = setting(0, min=0, max=65536,
                                 help="lighting = prt-...: CPCA clusters of the transfer matrices (4 principal vectors "
                                      "each; 0: uncompressed)")
