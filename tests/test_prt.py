@@ -70,28 +70,40 @@ def linear_in_position(variant, positions, rng):
     return at(positions).astype(np.float32), at
 
 
+def quadratic_light(rng, spread):
+    """SH bands 0-2 (9, 3) of a light: a constant and small others."""
+    light = np.zeros((9, 3))
+    light[0] = [3.0, 2.5, 2.0]
+    light[1:] = rng.uniform(-spread, spread, (8, 3))
+    return light
+
+
+def relit_render(gl, maps, variant, matrices, light):  # noqa: F811
+    """The normal-mapped sphere with PRT (diffuse only), relit and drawn: HDR, mask, debug targets (float64)."""
+    from tests.test_render import render
+
+    material = Material(KD, KS0, 80.0, normal_map=bumps(), prt_variant=variant, prt_matrices=matrices)
+    r = render(gl, maps, material, debug=True)
+    r.relight(light)
+    r.render_objects(*look_at(EYE, [0.0, 0.1, 0.0]))
+    mask = r.read_mask() > 0.5
+    assert 0.03 < mask.mean() < 0.5
+    return r.read_hdr(), mask, [x.astype(np.float64) for x in r.read_debug()]
+
+
 @pytest.mark.parametrize("variant", prt.VARIANTS)
 def test_gl_per_vertex_prt_equals_the_numpy_reference(gl, maps, variant):  # noqa: F811
     """Per-vertex PRT on a normal-mapped sphere (diffuse only): matrices linear in the vertex's world point,
     so that GL's interpolated coefficients are the same function at the fragment's point (debug target);
     GL against prt_diffuse within 1e-3 relative."""
-    from tests.test_render import render
-
     rng = np.random.default_rng(11)
     v = prt.get_variant(variant)
     mesh = uv_sphere(0.1)
     positions = mesh.positions.astype(np.float64) + [0.0, 0.1, 0.0]
     matrices, at = linear_in_position(v, positions, rng)
-    light = np.zeros((9, 3))
-    light[0] = [3.0, 2.5, 2.0]
-    light[1:] = rng.uniform(-0.2, 0.2, (8, 3))
-    material = Material(KD, (0.0, 0.0, 0.0), 80.0, normal_map=bumps(), prt_variant=variant, prt_matrices=matrices)
-    r = render(gl, maps, material, debug=True)
-    r.relight(light)
-    r.render_objects(*look_at(EYE, [0.0, 0.1, 0.0]))
-    hdr, mask = r.read_hdr(), r.read_mask() > 0.5
-    normal, point = (x[..., :3].astype(np.float64) for x in r.read_debug())
-    assert 0.03 < mask.mean() < 0.5
+    light = quadratic_light(rng, 0.2)
+    hdr, mask, (normal, point) = relit_render(gl, maps, variant, matrices, light)
+    normal, point = normal[..., :3], point[..., :3]
     coefficients = at(point[mask]) @ light
     reference = np.array(KD) * prt.prt_diffuse(coefficients, v, normal[mask])
     rel = np.abs(hdr[mask] - reference) / np.abs(reference)
@@ -103,22 +115,14 @@ def test_gl_per_texel_prt_equals_the_numpy_reference(gl, maps, variant):  # noqa
     """Per-texel PRT: the coefficients relit into the light-map texture, looked up as GL does (bilinear,
     repeating, level 0 at this distance)."""
     from arsim.evaluate.inm_compare import sample_periodic
-    from tests.test_render import render
 
     rng = np.random.default_rng(12)
     v = prt.get_variant(variant)
     incident = rng.uniform(-0.05, 0.05, (16, 32, 9, 9))  # per texel, the incident radiance's SH: a constant
     incident[..., 0, 0] += 1.0  # dominates, so that every variant's exit radiance stays well above 0
     matrices = np.einsum("bs,hwsl->hwbl", v.projection, incident).astype(np.float32)
-    light = np.zeros((9, 3))
-    light[0] = [3.0, 2.5, 2.0]
-    light[1:] = rng.uniform(-0.1, 0.1, (8, 3))
-    material = Material(KD, (0.0, 0.0, 0.0), 80.0, normal_map=bumps(), prt_variant=variant, prt_matrices=matrices)
-    r = render(gl, maps, material, debug=True)
-    r.relight(light)
-    r.render_objects(*look_at(EYE, [0.0, 0.1, 0.0]))
-    hdr, mask = r.read_hdr(), r.read_mask() > 0.5
-    normal, incident = (x.astype(np.float64) for x in r.read_debug())
+    light = quadratic_light(rng, 0.1)
+    hdr, mask, (normal, incident) = relit_render(gl, maps, variant, matrices, light)
     uv2 = np.stack([normal[mask][:, 3], incident[mask][:, 3]], axis=-1)
     coefficients = sample_periodic(prt.relight(matrices.reshape(-1, v.count, 9), light).reshape(16, 32, v.count, 3), uv2)
     reference = np.array(KD) * prt.prt_diffuse(coefficients, v, normal[mask][:, :3])
