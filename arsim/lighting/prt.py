@@ -26,7 +26,7 @@ import os
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import cache
+from functools import cache, lru_cache
 from math import sqrt
 from pathlib import Path
 
@@ -327,8 +327,18 @@ def light_sh(anglemap: np.ndarray, order: int = DEFAULT_ORDER) -> np.ndarray:
     from arsim.lighting.bases.lightmap import probe_samples
 
     check_order(order)
-    directions, weighted = probe_samples(np.asarray(anglemap))
-    return sh_basis(directions, order).T @ weighted
+    anglemap = np.asarray(anglemap)
+    _, weighted = probe_samples(anglemap)
+    return _anglemap_basis(anglemap.shape[0], order).T @ weighted
+
+
+@lru_cache(maxsize=4)
+def _anglemap_basis(n: int, order: int) -> np.ndarray:
+    """(disk texels, order^2): the SH at an n x n angle map's disk texels (kept: relighting reads it per frame)."""
+    from arsim.lighting.bases.lightmap import probe_samples
+
+    directions, _ = probe_samples(np.zeros((n, n, 3), np.float32))
+    return sh_basis(directions, order)
 
 
 def variant_transfer(transfer: Transfer, variant: Variant) -> np.ndarray:
