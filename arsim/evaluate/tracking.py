@@ -11,6 +11,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from arsim.core.png import read_frame
+from arsim.core.tags import DEFAULT_DETECTOR
 from arsim.evaluate.capture_report import orientation_errors_deg
 from arsim.evaluate.recording_plots import tag_in_view
 from arsim.sensors.frames import frame_camera_orientations, frame_positions, recording_camera
@@ -66,11 +67,12 @@ def measure_poses(rec: Recording, poses: list[TagPose], frames: np.ndarray | Non
 
 
 def track_recording(rec: Recording, linear_of_code: np.ndarray | None = None,
-                    progress: Callable[[float], None] = lambda fraction: None) -> TrackingRun:
-    """Track the tag through an AR recording's frames and measure every pose against the truth;
-    linear_of_code: the camera's inverse response (256,), e.g. the capture's, to linearise the frames."""
+                    progress: Callable[[float], None] = lambda fraction: None, detector: str = DEFAULT_DETECTOR) -> TrackingRun:
+    """Track the tag through an AR recording's frames with a detector by name and measure every pose against
+    the truth; linear_of_code: the camera's inverse response (256,), e.g. the capture's, to linearise the frames."""
     table = rec.meta["table"]
-    tracker = TagTracker(recording_camera(rec), table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+    tracker = TagTracker(recording_camera(rec), table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code,
+                         detector)
     poses = []
     for k, frame in enumerate(rec.frames):
         poses.append(tracker.track(read_frame(rec.folder / frame["file"])))

@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from arsim.core.png import read_frame
 from arsim.core.errors import ArsimError
+from arsim.core.tags import DEFAULT_DETECTOR
 from arsim.core.files import atomic_path, write_bytes_atomic
 from arsim.core.gl import create_gl_context
 from arsim.core.png import png_bytes
@@ -47,6 +48,7 @@ class SessionSettings:
     # The probe as the capture grew (angle maps, CaptureResult.snapshots), replayed over the session: PRT objects
     # relit from each in turn (the truth frames keep the true light); empty: relit once, from the final probe.
     lights: tuple = ()
+    detector: str = DEFAULT_DETECTOR  # the tag detector ([ar] detector)
 
 
 Scorer = Callable[[np.ndarray, np.ndarray, np.ndarray], float]  # (truth frame, frame, mask) -> score inside the mask
@@ -87,11 +89,11 @@ def check_maps(maps: dict[str, MapSet], needed: dict[str, list[float]]) -> None:
                              f"({held}); bake them: arsim bake PROBE.exr -o DIR --method {name} --spec {spec}")
 
 
-def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray) -> tuple:
+def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray, detector: str) -> tuple:
     """The recording's camera, and a tracker for its table's tag that linearises frames with linear_of_code."""
     camera = recording_camera(rec)
     table = rec.meta["table"]
-    return camera, TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code)
+    return camera, TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code, detector)
 
 
 def _renderer(camera, maps: dict[str, MapSet], ctx, method: str, objects: list[SceneObject]) -> Renderer:
@@ -113,7 +115,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     frames show them, where their directional light maps were baked from the true environment
     (light_objects); default: `objects`."""
     ctx = create_gl_context()
-    camera, tracker = _camera_and_tracker(rec, linear_of_code)
+    camera, tracker = _camera_and_tracker(rec, linear_of_code, settings.detector)
     captured = _renderer(camera, maps, ctx, settings.method, objects)
     true_light = _renderer(camera, truth_maps, ctx, settings.method, objects if truth_objects is None else truth_objects)
     indices = np.arange(0, len(rec.frames), settings.every)
@@ -191,7 +193,7 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
     half of the bake and after it go to out_dir/frames (the progress display). Returns the loop's
     FrameRecord per frame (the profile's input)."""
     ctx = create_gl_context()
-    camera, tracker = _camera_and_tracker(rec, linear_of_code)
+    camera, tracker = _camera_and_tracker(rec, linear_of_code, settings.detector)
     needed = maps_needed(objects, settings.method)
     renderer = _renderer(camera, session_maps(probe, needed), ctx, settings.method, light_objects(objects, probe))
     baker = LoopBaker(probe, needed[settings.method], bake_settings, ctx)

@@ -88,7 +88,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, maps_needed, run_session
     from arsim.run.report import write_report
-    from arsim.run.stages import growing_lights, measured_capture, session_probe
+    from arsim.run.stages import with_scenario, measured_capture, session_probe
     from arsim.scenario.environment import load_environment
     from arsim.sensors.recording import load_recording, record, recording_segments
 
@@ -158,8 +158,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         gl.release()
 
     # 4. The AR session over the AR path, and its render-loop profile.
-    session_settings = growing_lights(SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay,
-                                                     flip_every=r.flip_every), recorded, [light for _, light in result.snapshots])
+    session_settings = with_scenario(SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay,
+                                                     flip_every=r.flip_every), scenario, [light for _, light in result.snapshots])
     with step("session", "4/5 rendering the AR session") as update:
         session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe),
                               masked_flip, session_settings, truth_objects=light_objects(objects, truth),

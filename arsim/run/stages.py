@@ -112,8 +112,10 @@ def session_inputs(scenario: Scenario, out: Path, probe: np.ndarray | None, map_
     return ar, probe, burst_response(sweep, SensorSettings.of(scenario.device.camera)), []
 
 
-def growing_lights(settings: SessionSettings, scenario: Scenario, snapshots: list) -> SessionSettings:
-    """The session's settings with the growing probe to replay where [render] prt_light = "growing"."""
+def with_scenario(settings: SessionSettings, scenario: Scenario, snapshots: list) -> SessionSettings:
+    """The session's settings with what the scenario says of the app: its tag detector, and the growing
+    probe to replay where [render] prt_light = "growing"."""
+    settings = dataclasses.replace(settings, detector=scenario.ar.detector)
     if scenario.render.prt_light != "growing":
         return settings
     if not snapshots:
@@ -133,7 +135,7 @@ def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map
     if maps is not None:
         check_maps(maps, needed)
     ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None, stage=stage)
-    settings = growing_lights(settings, scenario, growing)
+    settings = with_scenario(settings, scenario, growing)
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
     with stage(f"computing the maps ({', '.join(needed)})"):
         maps = maps if maps is not None else session_maps(probe, needed, source)
@@ -157,7 +159,7 @@ def profile_session(scenario: Scenario, out: Path, bakes: Sequence[BakeSettings]
     r = scenario.render
     objects = scene_objects(r, scenario.ar.table_albedo) if objects is None else objects
     ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, stage=stage)
-    settings = growing_lights(SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True), scenario, growing)
+    settings = with_scenario(SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True), scenario, growing)
     runs, poses = [], {}
     for b in bakes:
         with stage(f"baking {b.method} maps in the loop, tile {b.label}") as update:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from arsim.core.conventions import map_size_problem
+from arsim.core.tags import DEFAULT_DETECTOR, DETECTORS, TAG_FAMILIES, detector_problem
 from arsim.lighting.methods import LOOP_METHODS, METHODS
 from arsim.scenario.schema import setting, subsection
 
@@ -174,8 +175,13 @@ class ArSection:
     shake_deg: float = setting(0.5, min=0.0, max=10.0, unit="degrees", help="hand shake")
     look_away: tuple[LookAwaySection, ...] = subsection(LookAwaySection, array=True, default=(LookAwaySection(),),
                                                       help="windows in which the tag leaves the view")
-    tag_family: str = setting("tag36h11", choices=("tag36h11",), help="AprilTag family")
-    tag_id: int = setting(0, min=0, max=586, help="id of the printed tag (tag36h11 has 587)")
+    tag_family: str = setting("tag36h11", choices=tuple(TAG_FAMILIES),
+                              help="the printed tag's family: AprilTag's tag36h11, tag25h9, tag16h5, or ArUco's aruco4x4_50")
+    tag_id: int = setting(0, min=0, max=586, help="id of the printed tag (tag36h11 has 587, tag25h9 35, tag16h5 30, "
+                                                  "aruco4x4_50 50)")
+    detector: str = setting(DEFAULT_DETECTOR, choices=tuple(DETECTORS),
+                            help="the tag detector: apriltag3 (AprilTag 3, the reference implementation; AprilTag families) "
+                                 "or opencv (OpenCV's ArUco module with AprilTag's corner refinement; every family)")
     tag_size_m: float = setting(0.16, min=0.01, max=5.0, unit="m", help="side of the tag's black square")
     tag_margin_cells: float = setting(1.0, min=0.0, max=10.0, help="white paper around the tag, in tag cells")
     table_size_m: tuple[float, float] = setting((1.6, 1.0), min=0.05, max=100.0, unit="m",
@@ -184,7 +190,9 @@ class ArSection:
                                                        help="diffuse reflectance of the table top (linear RGB)")
 
     def rules(self) -> str | None:
-        return None if self.near_m <= self.far_m else f"far_m = {self.far_m} is below near_m = {self.near_m}: give near_m <= far_m"
+        if self.near_m > self.far_m:
+            return f"far_m = {self.far_m} is below near_m = {self.near_m}: give near_m <= far_m"
+        return detector_problem(self.detector, self.tag_family, self.tag_id)
 
 
 MAP_METHODS = tuple(METHODS)

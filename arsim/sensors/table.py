@@ -3,24 +3,23 @@
 Both are matte (Lambertian) and lit by the same environment as everything else, at infinity: their
 radiance is reflectance x M_1(+y), the environment's normalised cosine average over the upper
 hemisphere (README: Conventions; E/pi). Shadows and the lower hemisphere play no part for a surface
-facing up. The tag image follows the marker frame OpenCV's pose estimation uses: its x axis (image
-columns) along world +x, its image top towards world -z, its normal +y.
+facing up. The tag is its family's official image (core/tags.py): its x axis (image columns) along world
++x, its image top towards world -z, its normal +y.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 
 import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
+from arsim.core.tags import TAG_FAMILIES
 from arsim.scenario.sections import ArSection
 
-TAG_DICTIONARIES = {"tag36h11": cv2.aruco.DICT_APRILTAG_36h11}
-TAG_CELLS = 8  # tag36h11: 6 x 6 data cells inside a one-cell black border
 INK, PAPER = 0.03, 0.80  # diffuse reflectances of printed black and of white paper
 CELL_TEXELS = 16
 
@@ -42,13 +41,14 @@ class Table:
     @property
     def paper_half_m(self) -> float:
         """Half the side of the printed sheet (tag plus margin)."""
-        return self.tag_size_m / 2 * (TAG_CELLS + 2 * self.margin_cells) / TAG_CELLS
+        cells = TAG_FAMILIES[self.tag_family].cells
+        return self.tag_size_m / 2 * (cells + 2 * self.margin_cells) / cells
 
     @cached_property
     def paper_image(self) -> np.ndarray:
-        """Reflectance (P, P) float32 of the printed sheet, row 0 towards world -z."""
-        dictionary = cv2.aruco.getPredefinedDictionary(TAG_DICTIONARIES[self.tag_family])
-        tag = cv2.aruco.generateImageMarker(dictionary, self.tag_id, TAG_CELLS * CELL_TEXELS, borderBits=1)
+        """Reflectance (P, P) float32 of the printed sheet, row 0 towards world -z: the family's official image
+        (core/tags.py) in a white margin."""
+        tag = official_tag_image(self.tag_family, self.tag_id, CELL_TEXELS)
         margin = int(round(self.margin_cells * CELL_TEXELS))
         sheet = np.pad(tag, margin, constant_values=255)
         return np.where(sheet > 127, PAPER, INK).astype(np.float32)
@@ -58,6 +58,38 @@ class Table:
         bottom-left of the tag image."""
         h = self.tag_size_m / 2
         return np.array([[-h, 0.0, -h], [h, 0.0, -h], [h, 0.0, h], [-h, 0.0, h]])
+
+
+def official_tag_image(family: str, tag_id: int, cell_texels: int) -> np.ndarray:
+    """The tag's black square (uint8, cells x cell_texels on a side) in its family's official orientation:
+    OpenCV's drawing turned by official_turn."""
+    f = TAG_FAMILIES[family]
+    drawn = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(f.opencv_dictionary), tag_id,
+                                          f.cells * cell_texels, borderBits=1)
+    return np.ascontiguousarray(np.rot90(drawn, official_turn(family)))
+
+
+@cache
+def official_turn(family: str) -> int:
+    """Quarter turns (counter-clockwise, np.rot90's k) that bring OpenCV's drawing of a family's tags to the
+    official image: for the AprilTag families, the turn that puts the corner AprilTag's reference decoder
+    (pupil-apriltags) reads as the official top-left (its fourth, the corners wrapping counter-clockwise from
+    the bottom-left) at the top-left; 0 for ArUco's, whose drawing OpenCV defines. OpenCV 5 draws tag36h11
+    turned by 2."""
+    f = TAG_FAMILIES[family]
+    if not f.apriltag:
+        return 0
+    import pupil_apriltags
+
+    drawn = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(f.opencv_dictionary), 0, f.cells * 8, borderBits=1)
+    image = np.pad(drawn, 16, constant_values=255)
+    found = [d for d in pupil_apriltags.Detector(families=family).detect(image) if d.tag_id == 0]
+    if not found:
+        raise RuntimeError(f"AprilTag's decoder does not read OpenCV's {family} drawing")
+    side = f.cells * 8
+    drawn_corners = 16 - 0.5 + np.array([[0, 0], [side, 0], [side, side], [0, side]])  # TL, TR, BR, BL (AprilTag's pixels)
+    where = int(np.argmin(np.linalg.norm(drawn_corners - found[0].corners[3], axis=1)))
+    return where  # the official top-left drawn at TL (0), TR (1: a quarter turn back), BR (2), BL (3)
 
 
 def upward_light(probe: np.ndarray) -> np.ndarray:

@@ -1,11 +1,11 @@
-"""AprilTag (tag36h11) detection with OpenCV's ArucoDetector and sub-pixel corners, and the camera pose
-from the four corners with solvePnP's IPPE_SQUARE, the solver made for a square of known size.
+"""The tag's pose per frame: its corners from a detector by name (tracking/detectors.py: AprilTag 3 or
+OpenCV's), then the camera pose from the four corners with solvePnP's IPPE_SQUARE, the solver made for a
+square of known size, refined by Levenberg-Marquardt where that helps.
 
 Frames are linearised with the camera's inverse response first (when it is known: the capture
 recovers it): the response brightens the blurred edge of the black square, which then looks smaller,
-and the tag farther away. On the default AR path the 95th percentile of the position error is 2.0 %
-of the distance on the 8-bit codes and 0.5 % linearised; AprilTag's own corner refinement (edges
-fitted along the whole side) beats cornerSubPix's there (1.3 %).
+and the tag farther away. On the default AR path the 95th percentile of the position error was 2.0 %
+of the distance on the 8-bit codes and 0.5 % linearised (OpenCV's detector).
 
 The tag lies on the table (README: Conventions): centred at the world origin, its x axis along world +x,
 its image top towards world -z, its normal +y. IPPE_SQUARE wants the corners in the marker's own frame
@@ -20,9 +20,12 @@ import cv2
 import numpy as np
 
 from arsim.core.conventions import CameraIntrinsics
-from arsim.sensors.table import TAG_DICTIONARIES
+from arsim.core.tags import DEFAULT_DETECTOR
+from arsim.tracking.detectors import make_detector
 
-MIN_WHITE_BLACK_DIFF = 20  # 8-bit codes (linearised): see TagTracker
+# Levenberg-Marquardt after IPPE, per detector: where it lowers the pose error on the default AR path
+# (benchmarks/bench_tracking.py).
+REFINE_POSE = {"apriltag3": True, "opencv": False}
 # Columns: the marker's x, y (up the tag image) and z (its normal) in world axes.
 MARKER_TO_WORLD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
@@ -59,54 +62,25 @@ BRIGHT_GAIN_MAX = 64.0  # the most a dark frame's linear codes are raised (beyon
 
 
 class TagTracker:
-    """Finds one tag (family, id, side of its black square) in 8-bit frames and returns its pose."""
+    """Finds one tag (family, id, side of its black square) in 8-bit frames with a detector by name
+    (tracking/detectors.py) and returns its pose: IPPE for a square, then, where the detector's corners
+    gain from it, Levenberg-Marquardt on the four corners (REFINE_POSE)."""
 
     def __init__(self, camera: CameraIntrinsics, tag_size_m: float, tag_id: int = 0, family: str = "tag36h11",
-                 linear_of_code: np.ndarray | None = None):
+                 linear_of_code: np.ndarray | None = None, detector: str = DEFAULT_DETECTOR):
         """linear_of_code (256,): the camera's inverse response (relative exposure of each 8-bit code),
         used to linearise frames before detection; None: detect on the codes."""
-        if family not in TAG_DICTIONARIES:
-            raise ValueError(f"unknown tag family {family!r}; known: {', '.join(TAG_DICTIONARIES)}")
-        dictionary = cv2.aruco.getPredefinedDictionary(TAG_DICTIONARIES[family])
-        parameters = cv2.aruco.DetectorParameters()
-        parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_APRILTAG
-        # AprilTag's quad search leaves out the 4 x 4 tiles whose codes span less than this: flat, noisy
-        # table and wall hold no edge of the tag, and clustering their noise was four fifths of the tracker's
-        # time. The tag's edges span far more; on the default AR path the corners are the same to the bit
-        # as with the default of 5, in a fifth of the time.
-        parameters.aprilTagMinWhiteBlackDiff = MIN_WHITE_BLACK_DIFF
-        # The AprilTag corner refinement runs AprilTag's own quad search over the image it is given:
-        # 130 ms on a 640 x 480 frame. The tag is found first without it (4 ms), then again with it on
-        # the tag's surroundings only, which gives the corners the whole frame would.
-        self.finder = cv2.aruco.ArucoDetector(dictionary, cv2.aruco.DetectorParameters())
+        self.detector_name = detector
+        self.detector = make_detector(detector, family, tag_id)
         self.linear = None if linear_of_code is None else np.asarray(linear_of_code, dtype=np.float64)
         self.linearise = None if self.linear is None else self._codes(self.linear[-1])
-        self.detector = cv2.aruco.ArucoDetector(dictionary, parameters)
         self.camera, self.tag_id = camera, tag_id
         h = tag_size_m / 2
         # IPPE_SQUARE's order: top-left, top-right, bottom-right, bottom-left, in the marker frame.
         self.marker_corners = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
 
-    def _find(self, detector, grey: np.ndarray) -> np.ndarray | None:
-        corners, ids, _ = detector.detectMarkers(grey)
-        if ids is None or self.tag_id not in ids.ravel():
-            return None
-        return corners[list(ids.ravel()).index(self.tag_id)].reshape(4, 2).astype(np.float64)
-
     def _corners(self, grey: np.ndarray) -> np.ndarray | None:
-        """The tag's four corners, refined (AprilTag's method) on a window around where it was found: the
-        tag's bounding box widened by half its size on each side (the white margin and beyond)."""
-        rough = self._find(self.finder, grey)
-        if rough is None:  # (AprilTag's own search finds some tags the quick one misses)
-            return self._find(self.detector, grey)
-        low, high = rough.min(axis=0), rough.max(axis=0)
-        pad = 0.5 * (high - low).max() + 8
-        x0, y0 = np.maximum(np.floor(low - pad).astype(int), 0)
-        x1, y1 = np.minimum(np.ceil(high + pad).astype(int) + 1, grey.shape[::-1])
-        refined = self._find(self.detector, np.ascontiguousarray(grey[y0:y1, x0:x1]))
-        if refined is None:  # (not seen in the window: the whole frame, as before)
-            return self._find(self.detector, grey)
-        return refined + [x0, y0]
+        return self.detector.corners(grey)
 
     def raised_table(self, grey: np.ndarray) -> np.ndarray | None:
         """For a dark frame, (256,) uint8: each code's linear exposure raised by the constant gain that
@@ -142,5 +116,8 @@ class TagTracker:
                                       flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
             return LOST
+        if REFINE_POSE[self.detector_name]:
+            rvec, tvec = cv2.solvePnPRefineLM(self.marker_corners, image_corners, self.camera.matrix,
+                                              self.camera.distortion, rvec, tvec)
         marker_to_camera = cv2.Rodrigues(rvec)[0]
         return TagPose(marker_to_camera @ MARKER_TO_WORLD.T, tvec.ravel(), image_corners)
