@@ -143,3 +143,20 @@ def test_corners_have_no_bias_against_the_truths_projection(ar_recording, detect
     bias = differences.mean(axis=0)
     assert (np.abs(bias) <= bound).all(), bias
     assert np.sqrt(np.mean((differences - bias) ** 2)) < 0.3  # (each corner near its own: the order is right)
+
+
+def test_fused_poses_are_no_worse_and_carry_on_through_a_short_loss_while_trusted(ar_recording):
+    """The tag's poses fused with the IMU (the default path's acceptance is measured by
+    benchmarks/bench_tracking.py): where the tag is in view, the 95th percentiles no worse than AprilTag 3
+    alone; in the look-away window, poses extrapolated for a while (their errors within the trust limits:
+    0.5 degrees and 1 % of the distance), then none (the window is longer than the pose is trusted)."""
+    from arsim.tracking.fusion import TRUST_POSITION_PCT, TRUST_ROTATION_DEG
+
+    rec, linear = ar_recording
+    alone, fused = (track_recording(rec, linear, fusion=f).metrics() for f in (False, True))
+    assert fused["tracking_rot_err_deg_p95"] <= alone["tracking_rot_err_deg_p95"]
+    assert fused["tracking_trans_err_pct_p95"] <= alone["tracking_trans_err_pct_p95"]
+    assert alone["frames_extrapolated"] == 0 and fused["frames_extrapolated"] >= 1  # (10 frames/s here: 0.1 s)
+    assert fused["extrapolated_rot_err_deg_p95"] <= TRUST_ROTATION_DEG
+    assert fused["extrapolated_trans_err_pct_p95"] <= TRUST_POSITION_PCT
+    assert fused["frames_lost"] >= 5  # the rest of the three seconds away: nothing drawn

@@ -58,3 +58,22 @@ def check_detector(detector: str, family: str, tag_id: int) -> None:
     problem = detector_problem(detector, family, tag_id)
     if problem:
         raise ArsimError(problem)
+
+
+def apriltag_detector(family: str, **options):
+    """pupil-apriltags' Detector for one family, destroyed in the right order: its own __del__ frees the
+    family before the detector, whose destruction still reads the family's decoding table (heap corruption,
+    seen as "malloc(): mismatching next->prev_size" once in a few runs)."""
+    import pupil_apriltags
+
+    class Detector(pupil_apriltags.Detector):
+        def __del__(self):
+            pointer, self.tag_detector_ptr = getattr(self, "tag_detector_ptr", None), None
+            if pointer is not None:
+                self.libc.apriltag_detector_destroy.restype = None
+                self.libc.apriltag_detector_destroy(pointer)
+                for name, f in self.tag_families.items():
+                    getattr(self.libc, f"{name}_destroy").restype = None
+                    getattr(self.libc, f"{name}_destroy")(f)
+
+    return Detector(families=family, **options)

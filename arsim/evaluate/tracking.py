@@ -14,9 +14,10 @@ from arsim.core.png import read_frame
 from arsim.core.tags import DEFAULT_DETECTOR
 from arsim.evaluate.capture_report import orientation_errors_deg
 from arsim.evaluate.recording_plots import tag_in_view
-from arsim.sensors.frames import frame_camera_orientations, frame_positions, recording_camera
+from arsim.sensors.frames import frame_camera_orientations, frame_positions
 from arsim.sensors.recording import Recording
-from arsim.tracking.apriltag import TagPose, TagTracker
+from arsim.tracking.apriltag import TagPose
+from arsim.tracking.fusion import recording_tracker
 
 
 @dataclass
@@ -29,7 +30,12 @@ class TrackingRun:
 
     @property
     def found(self) -> np.ndarray:
+        """(K,) bool: a pose was given (and objects drawn): detected, or extrapolated by the IMU fusion."""
         return np.array([p.found for p in self.poses])
+
+    @property
+    def extrapolated(self) -> np.ndarray:
+        return np.array([p.found and p.extrapolated for p in self.poses])
 
     def metrics(self) -> dict:
         """Summary: the 95th percentiles over the frames where the tag was fully visible (a visible
@@ -47,7 +53,16 @@ class TrackingRun:
             "frames_tag_visible": int(visible.sum()),
             "detection_rate_visible": float(found[visible].mean()) if visible.any() else float("nan"),
             "found_while_not_visible": int((found & ~visible).sum()),
+            # the IMU fusion's poses without a tag: how many, for how long at the most, and their errors
+            "frames_extrapolated": int(self.extrapolated.sum()),
+            "extrapolated_s_max": max((p.since_tag_s for p in self.poses if p.found and p.extrapolated), default=0.0),
+            "extrapolated_rot_err_deg_p95": _p95(self.rot_err_deg[self.extrapolated]),
+            "extrapolated_trans_err_pct_p95": _p95(self.trans_err_pct[self.extrapolated]),
         }
+
+
+def _p95(values: np.ndarray) -> float | None:
+    return float(np.percentile(values, 95, method="higher")) if len(values) else None
 
 
 def measure_poses(rec: Recording, poses: list[TagPose], frames: np.ndarray | None = None) -> TrackingRun:
@@ -67,15 +82,15 @@ def measure_poses(rec: Recording, poses: list[TagPose], frames: np.ndarray | Non
 
 
 def track_recording(rec: Recording, linear_of_code: np.ndarray | None = None,
-                    progress: Callable[[float], None] = lambda fraction: None, detector: str = DEFAULT_DETECTOR) -> TrackingRun:
-    """Track the tag through an AR recording's frames with a detector by name and measure every pose against
-    the truth; linear_of_code: the camera's inverse response (256,), e.g. the capture's, to linearise the frames."""
-    table = rec.meta["table"]
-    tracker = TagTracker(recording_camera(rec), table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code,
-                         detector)
+                    progress: Callable[[float], None] = lambda fraction: None, detector: str = DEFAULT_DETECTOR,
+                    fusion: bool = False) -> TrackingRun:
+    """Track the tag through an AR recording's frames with a detector by name (fused with the IMU where
+    fusion is set) and measure every pose against the truth; linear_of_code: the camera's inverse response
+    (256,), e.g. the capture's, to linearise the frames."""
+    tracker = recording_tracker(rec, linear_of_code, detector, fusion)
     poses = []
     for k, frame in enumerate(rec.frames):
-        poses.append(tracker.track(read_frame(rec.folder / frame["file"])))
+        poses.append(tracker.track(read_frame(rec.folder / frame["file"]), k))
         if k % 20 == 0:
             progress((k + 1) / len(rec.frames))
     progress(1.0)

@@ -110,9 +110,9 @@ class FrameLoop:
             return self.pose_cache[index]
         poses = []
         if record is None:
-            poses.append(self.tracker.track(frame))
+            poses.append(self.tracker.track(frame, index))
         else:
-            self._timed(record, "track", lambda: poses.append(self.tracker.track(frame)), gl=False)
+            self._timed(record, "track", lambda: poses.append(self.tracker.track(frame, index)), gl=False)
         if self.pose_cache is not None:
             self.pose_cache[index] = poses[0]
         return poses[0]

@@ -30,7 +30,8 @@ from arsim.render.loop import GL_STEPS, FrameLoop, Shading
 from arsim.render.renderer import Renderer, SceneObject
 from arsim.sensors.frames import recording_camera
 from arsim.sensors.recording import Recording
-from arsim.tracking.apriltag import TagPose, TagTracker
+from arsim.tracking.apriltag import TagPose
+from arsim.tracking.fusion import recording_tracker
 
 STEPS = ("track", "relight", "background", "objects", "tone_mapping", "overlay", "readback", "truth_frame")
 
@@ -49,6 +50,7 @@ class SessionSettings:
     # relit from each in turn (the truth frames keep the true light); empty: relit once, from the final probe.
     lights: tuple = ()
     detector: str = DEFAULT_DETECTOR  # the tag detector ([ar] detector)
+    fusion: bool = True  # the tag's poses fused with the IMU ([ar] fusion)
 
 
 Scorer = Callable[[np.ndarray, np.ndarray, np.ndarray], float]  # (truth frame, frame, mask) -> score inside the mask
@@ -89,11 +91,11 @@ def check_maps(maps: dict[str, MapSet], needed: dict[str, list[float]]) -> None:
                              f"({held}); bake them: arsim bake PROBE.exr -o DIR --method {name} --spec {spec}")
 
 
-def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray, detector: str) -> tuple:
-    """The recording's camera, and a tracker for its table's tag that linearises frames with linear_of_code."""
+def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray, settings: SessionSettings) -> tuple:
+    """The recording's camera, and a tracker for its table's tag that linearises frames with linear_of_code
+    (fused with the recording's IMU where the settings say)."""
     camera = recording_camera(rec)
-    table = rec.meta["table"]
-    return camera, TagTracker(camera, table["tag_size_m"], table["tag_id"], table["tag_family"], linear_of_code, detector)
+    return camera, recording_tracker(rec, linear_of_code, settings.detector, settings.fusion)
 
 
 def _renderer(camera, maps: dict[str, MapSet], ctx, method: str, objects: list[SceneObject]) -> Renderer:
@@ -115,7 +117,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     frames show them, where their directional light maps were baked from the true environment
     (light_objects); default: `objects`."""
     ctx = create_gl_context()
-    camera, tracker = _camera_and_tracker(rec, linear_of_code, settings.detector)
+    camera, tracker = _camera_and_tracker(rec, linear_of_code, settings)
     captured = _renderer(camera, maps, ctx, settings.method, objects)
     true_light = _renderer(camera, truth_maps, ctx, settings.method, objects if truth_objects is None else truth_objects)
     indices = np.arange(0, len(rec.frames), settings.every)
@@ -193,7 +195,7 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
     half of the bake and after it go to out_dir/frames (the progress display). Returns the loop's
     FrameRecord per frame (the profile's input)."""
     ctx = create_gl_context()
-    camera, tracker = _camera_and_tracker(rec, linear_of_code, settings.detector)
+    camera, tracker = _camera_and_tracker(rec, linear_of_code, settings)
     needed = maps_needed(objects, settings.method)
     renderer = _renderer(camera, session_maps(probe, needed), ctx, settings.method, light_objects(objects, probe))
     baker = LoopBaker(probe, needed[settings.method], bake_settings, ctx)

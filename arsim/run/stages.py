@@ -115,7 +115,7 @@ def session_inputs(scenario: Scenario, out: Path, probe: np.ndarray | None, map_
 def with_scenario(settings: SessionSettings, scenario: Scenario, snapshots: list) -> SessionSettings:
     """The session's settings with what the scenario says of the app: its tag detector, and the growing
     probe to replay where [render] prt_light = "growing"."""
-    settings = dataclasses.replace(settings, detector=scenario.ar.detector)
+    settings = dataclasses.replace(settings, detector=scenario.ar.detector, fusion=scenario.ar.fusion)
     if scenario.render.prt_light != "growing":
         return settings
     if not snapshots:

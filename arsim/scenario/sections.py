@@ -179,6 +179,8 @@ class ArSection:
                               help="the printed tag's family: AprilTag's tag36h11, tag25h9, tag16h5, or ArUco's aruco4x4_50")
     tag_id: int = setting(0, min=0, max=586, help="id of the printed tag (tag36h11 has 587, tag25h9 35, tag16h5 30, "
                                                   "aruco4x4_50 50)")
+    fusion: bool = setting(True, help="fuse the tag's poses with the IMU (an error-state Kalman filter): smoother poses, "
+                                      "and poses extrapolated through short losses while they are trusted")
     detector: str = setting(DEFAULT_DETECTOR, choices=tuple(DETECTORS),
                             help="the tag detector: apriltag3 (AprilTag 3, the reference implementation; AprilTag families) "
                                  "or opencv (OpenCV's ArUco module with AprilTag's corner refinement; every family)")

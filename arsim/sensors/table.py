@@ -17,7 +17,7 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
-from arsim.core.tags import TAG_FAMILIES
+from arsim.core.tags import TAG_FAMILIES, apriltag_detector
 from arsim.scenario.sections import ArSection
 
 INK, PAPER = 0.03, 0.80  # diffuse reflectances of printed black and of white paper
@@ -79,11 +79,10 @@ def official_turn(family: str) -> int:
     f = TAG_FAMILIES[family]
     if not f.apriltag:
         return 0
-    import pupil_apriltags
 
     drawn = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(f.opencv_dictionary), 0, f.cells * 8, borderBits=1)
     image = np.pad(drawn, 16, constant_values=255)
-    found = [d for d in pupil_apriltags.Detector(families=family).detect(image) if d.tag_id == 0]
+    found = [d for d in apriltag_detector(family).detect(image) if d.tag_id == 0]
     if not found:
         raise RuntimeError(f"AprilTag's decoder does not read OpenCV's {family} drawing")
     side = f.cells * 8

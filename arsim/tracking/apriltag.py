@@ -37,7 +37,13 @@ class TagPose:
 
     rotation: np.ndarray | None  # (3, 3) world to camera
     translation: np.ndarray | None  # (3,) world origin (the tag's centre) in camera coordinates, metres
-    corners: np.ndarray | None  # (4, 2) sub-pixel image corners in OpenCV's order
+    corners: np.ndarray | None  # (4, 2) sub-pixel image corners in the official order (core/tags.py)
+    # With the IMU fused (tracking/fusion.py): no tag pose was taken in this frame, the pose is the filter's
+    # extrapolation, since_tag_s after the last one; the filter's 1-sigma rotation (deg) and position (m).
+    extrapolated: bool = False
+    since_tag_s: float = 0.0
+    sigma_rotation_deg: float | None = None
+    sigma_position_m: float | None = None
 
     @property
     def found(self) -> bool:
@@ -97,8 +103,9 @@ class TagTracker:
         """(256,) uint8: each code's linear exposure in 8 bits, `level` at 255."""
         return np.clip(np.round(255 * self.linear / level), 0, 255).astype(np.uint8)
 
-    def track(self, frame: np.ndarray) -> TagPose:
-        """The tag's pose in an 8-bit RGB or grey frame, or LOST."""
+    def track(self, frame: np.ndarray, index: int | None = None) -> TagPose:
+        """The tag's pose in an 8-bit RGB or grey frame, or LOST (index: the frame's, for trackers that need
+        it: FusedTracker)."""
         grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
         if self.linearise is None:
             image_corners = self._corners(grey)

@@ -15,18 +15,19 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from arsim.core.tags import TAG_FAMILIES, check_detector
+from arsim.core.tags import TAG_FAMILIES, apriltag_detector, check_detector
 from arsim.sensors.table import official_turn
 
 MIN_WHITE_BLACK_DIFF = 20  # 8-bit codes (linearised): see OpenCVDetector
+# Each detector's corner noise (px, RMS about the truth's projection on rendered frames: tests/test_tracking.py
+# measures 0.052 and 0.100): what the IMU fusion weighs its poses by.
+CORNER_SIGMA_PX = {"apriltag3": 0.05, "opencv": 0.10}
 
 
 class AprilTag3Detector:
     def __init__(self, family: str, tag_id: int, decimate: float = 2.0):
-        import pupil_apriltags
-
         self.tag_id = tag_id
-        self.detector = pupil_apriltags.Detector(families=family, nthreads=1, quad_decimate=decimate, refine_edges=1)
+        self.detector = apriltag_detector(family, nthreads=1, quad_decimate=decimate, refine_edges=1)
 
     def corners(self, grey: np.ndarray) -> np.ndarray | None:
         for d in self.detector.detect(np.ascontiguousarray(grey)):
