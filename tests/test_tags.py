@@ -36,3 +36,18 @@ def test_a_detector_is_checked_against_the_family(detector, family, fragment):
     assert (problem is None) if fragment is None else (fragment in problem)
     assert "tag16h5 has ids 0 to 29" in detector_problem("opencv", "tag16h5", 30)
     assert TAG_FAMILIES["tag36h11"].cells == 8
+
+
+@pytest.mark.parametrize("ar, fragment", [
+    ('detector = "nosuch"', "[ar] detector"),
+    ('detector = "apriltag3"\ntag_family = "aruco4x4_50"', "the apriltag3 detector does not read aruco4x4_50 tags"),
+    ('tag_family = "tag16h5"\ntag_id = 40', "tag id 40: tag16h5 has ids 0 to 29"),
+])
+def test_a_detector_that_cannot_read_the_tag_is_refused_in_one_line(tmp_path, ar, fragment):
+    from tests.test_cli import arsim, assert_one_line_error
+
+    path = tmp_path / "bad.toml"
+    path.write_text(f"[ar]\n{ar}\n")
+    assert_one_line_error(arsim("validate", path), fragment)
+    assert_one_line_error(arsim("render", path, "-o", tmp_path / "out"), fragment)
+    assert not (tmp_path / "out").exists()
