@@ -16,7 +16,7 @@ from arsim.scenario.sections import ProfileSection, RenderObjectSection, RenderS
 
 # The stages in the order data flows through them (README: Layout); a module may import its own stage and
 # those before it. cli, __main__ and testing sit on top.
-LAYERS = ["core", "lighting", "scenario", "sensors", ("capture", "tracking"), "render", "evaluate", "run"]
+LAYERS = ["core", "lighting", "scenario", "sensors", ("capture", "tracking"), "estimate", "render", "evaluate", "run"]
 RANK = {name: rank for rank, layer in enumerate(LAYERS) for name in ((layer,) if isinstance(layer, str) else layer)}
 PACKAGE = Path(arsim.__file__).parent
 

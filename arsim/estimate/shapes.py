@@ -1,0 +1,140 @@
+"""The shapes of a light estimate, from an angle-map light in world axes (README: Light estimation).
+
+- `sh_radiance` (9, 3): the radiance's coefficients L_lm in the real orthonormal SH basis of bands 0-2,
+  ordered (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1), (2,0), (2,1), (2,2), of the world direction
+  (x, y, z) as three.js and WebXR write them (Y1-1 ~ y, Y10 ~ z, Y11 ~ x; bases.functions.sh9), so that
+  the irradiance is E(n) = sum A_l L_lm Y_lm(n), A_l = pi, 2 pi / 3, pi / 4. By the sum over the angle
+  map's disk texels with their solid angles, in float64.
+- `main_light`: the brightest region (the texels connected to the brightest one whose luminance is at
+  least MAIN_LIGHT_SHARE of its) as a direction (its energy-weighted centroid, world axes) and an RGB
+  intensity (its radiance x solid angle summed: the irradiance it gives a surface facing it).
+- `cubemap` (6, N, N, 3): radiance on the faces +X, -X, +Y, -Y, +Z, -Z in OpenGL's cube-map convention
+  (face texel (row r, column c) at s = (c + 0.5) / N, t = (r + 0.5) / N: cube_directions), each texel the
+  energy of the light's texels in it over its solid angle (a box filter over the sphere).
+- `ambient_intensity`: the mean luminance (Rec. 709 weights) of the radiance over the sphere;
+  `color_correction` (4): ARCore's ambient mode's shape, the mean radiance's RGB over its green, and the
+  ambient intensity.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, normalize
+from arsim.core.resample import to_layout
+from arsim.lighting.bases.functions import sh9
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709, linear
+MAIN_LIGHT_SHARE = 0.5  # the main light: texels at least this share of the brightest one's luminance
+CUBE_SIZE = 16  # ARCore's environmental HDR cubemap: 16 x 16 per face
+SPLAT_SIDE = 16 * CUBE_SIZE  # the angle map's side the cubemap is summed from (at least; about 33 texels a cube texel)
+
+
+@dataclass(frozen=True)
+class LightEstimate:
+    sh_radiance: np.ndarray  # (9, 3)
+    main_light_direction: np.ndarray  # (3,) unit, world
+    main_light_intensity: np.ndarray  # (3,) RGB, radiance x sr
+    cubemap: np.ndarray  # (6, N, N, 3)
+    ambient_intensity: float
+    color_correction: np.ndarray  # (4,)
+
+
+def _disk(anglemap: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The disk texels' directions (K, 3), radiance (K, 3) and solid angles (K,)."""
+    n = anglemap.shape[0]
+    inside = anglemap_disk_mask(n)
+    return anglemap_directions(n)[inside], np.asarray(anglemap, dtype=np.float64)[inside][:, :3], anglemap_solid_angles(n)[inside]
+
+
+def sh_radiance(anglemap: np.ndarray) -> np.ndarray:
+    """(9, 3): the radiance's SH of bands 0-2 (see the module's docstring)."""
+    d, radiance, omega = _disk(anglemap)
+    return sh9(d).T @ (radiance * omega[:, None])
+
+
+def main_light(anglemap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(direction (3,), intensity (3,)) of the brightest region (see the module's docstring)."""
+    light = np.asarray(anglemap, dtype=np.float64)[..., :3]
+    n = light.shape[0]
+    inside = anglemap_disk_mask(n)
+    luminance = np.where(inside, light @ LUMA, 0.0)
+    brightest = np.unravel_index(np.argmax(luminance), luminance.shape)
+    bright = (luminance >= MAIN_LIGHT_SHARE * luminance[brightest]).astype(np.uint8)
+    _, labels = cv2.connectedComponents(bright, connectivity=8)
+    region = labels == labels[brightest]
+    weights = (luminance * anglemap_solid_angles(n))[region]
+    direction = normalize((anglemap_directions(n)[region] * weights[:, None]).sum(axis=0))
+    intensity = (light[region] * anglemap_solid_angles(n)[region][:, None]).sum(axis=0)
+    return direction, intensity
+
+
+# OpenGL's cube-map faces: per face its major axis and the axes s and t run along (GL spec, table 8.19)
+_FACES = (((1, 0, 0), (0, 0, -1), (0, -1, 0)), ((-1, 0, 0), (0, 0, 1), (0, -1, 0)),
+          ((0, 1, 0), (1, 0, 0), (0, 0, 1)), ((0, -1, 0), (1, 0, 0), (0, 0, -1)),
+          ((0, 0, 1), (1, 0, 0), (0, -1, 0)), ((0, 0, -1), (-1, 0, 0), (0, -1, 0)))
+
+
+def cube_directions(size: int, supersample: int = 1) -> np.ndarray:
+    """(6, size * supersample, size * supersample, 3) unit directions at the (sub)texel centres of the six
+    faces: row r, column c at s = (c + 0.5) / M, t = (r + 0.5) / M (M = size x supersample)."""
+    m = size * supersample
+    st = (np.arange(m) + 0.5) / m * 2 - 1
+    t, s = np.meshgrid(st, st, indexing="ij")
+    faces = [np.asarray(major) + s[..., None] * np.asarray(sa) + t[..., None] * np.asarray(ta) for major, sa, ta in _FACES]
+    return normalize(np.stack(faces).astype(np.float64))
+
+
+def cube_solid_angles(size: int) -> np.ndarray:
+    """(size, size) the solid angle of a face's texels (the same on every face; they sum to 4 pi / 6)."""
+    edges = np.linspace(-1.0, 1.0, size + 1)
+
+    def corner(x, y):  # the solid angle of the face's part from its centre to (x, y)
+        return np.arctan2(x * y, np.sqrt(x * x + y * y + 1))
+
+    x0, y0 = np.meshgrid(edges[:-1], edges[:-1], indexing="ij")
+    x1, y1 = np.meshgrid(edges[1:], edges[1:], indexing="ij")
+    return corner(x1, y1) - corner(x0, y1) - corner(x1, y0) + corner(x0, y0)
+
+
+def cube_texels(directions: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(face, row, col) of the cube texel each unit direction (K, 3) falls in."""
+    d = np.asarray(directions, dtype=np.float64)
+    axis = np.argmax(np.abs(d), axis=1)
+    face = 2 * axis + (d[np.arange(len(d)), axis] < 0)
+    table = np.array(_FACES, dtype=np.float64)  # (6, 3 vectors, 3)
+    major = np.abs(d[np.arange(len(d)), axis])
+    s = np.einsum("kj,kj->k", d, table[face, 1]) / major
+    t = np.einsum("kj,kj->k", d, table[face, 2]) / major
+    col = np.clip(((s + 1) / 2 * size).astype(int), 0, size - 1)
+    row = np.clip(((t + 1) / 2 * size).astype(int), 0, size - 1)
+    return face, row, col
+
+
+def cubemap(anglemap: np.ndarray, size: int = CUBE_SIZE) -> np.ndarray:
+    """(6, size, size, 3) float32: the light on the cube's faces, each texel the light's energy (radiance x
+    solid angle) of the angle-map texels that fall in it over the texel's solid angle: a box filter, so that
+    a small sun's energy lands whole in one texel (point samples miss it or multiply it). A light coarser
+    than SPLAT_SIDE is resampled to it first (core.resample), so that every cube texel gets many."""
+    light = np.asarray(anglemap, dtype=np.float32)[..., :3]
+    if light.shape[0] < SPLAT_SIDE:
+        light = to_layout(light, "anglemap", SPLAT_SIDE)
+    d, radiance, omega = _disk(light)
+    face, row, col = cube_texels(d, size)
+    sums = np.zeros((6, size, size, 3))
+    np.add.at(sums, (face, row, col), radiance * omega[:, None])
+    return (sums / cube_solid_angles(size)[None, :, :, None]).astype(np.float32)
+
+
+def estimate_light(anglemap: np.ndarray) -> LightEstimate:
+    """Every shape of an angle-map light (world axes)."""
+    d, radiance, omega = _disk(anglemap)
+    mean = (radiance * omega[:, None]).sum(axis=0) / omega.sum()
+    ambient = float(mean @ LUMA)
+    green = mean[1] if mean[1] > 0 else 1.0
+    direction, intensity = main_light(anglemap)
+    return LightEstimate(sh_radiance(anglemap), direction, intensity, cubemap(anglemap), ambient,
+                         np.array([mean[0] / green, 1.0, mean[2] / green, ambient]))

@@ -1,0 +1,125 @@
+"""Light estimates in the platforms' shapes (arsim/estimate): the truth's SH against an independent
+projection, the main light against the sun's centroid, the cubemap's mean against the environment's."""
+
+import numpy as np
+import pytest
+
+from arsim.core.hdr_io import read_hdr
+from arsim.core.resample import to_layout
+from arsim.estimate.shapes import LUMA, cube_solid_angles, cubemap, estimate_light, main_light, sh_radiance
+from tests.conftest import ENVMAPS
+
+
+def envmap(name, layout="anglemap", size=256):
+    path = next(p for p in ENVMAPS if p.stem == name)
+    return to_layout(read_hdr(path), layout, size)
+
+
+def test_the_sh_of_the_radiance_equals_an_independent_projection():
+    """The angle map's SH against the same light's projection done another way: on its equirect twin at
+    four times the resolution, with scipy's complex SH turned real (float64), within 1e-4 relative of the
+    coefficients' largest; and against itself turned into the cubemap's texels with their solid angles."""
+    from scipy.special import sph_harm_y
+
+    from arsim.core.conventions import equirect_directions, equirect_solid_angles
+
+    light = envmap("interior", "anglemap", 512)
+    mine = sh_radiance(light)
+    # the independent route: the same angle map's texels, but the basis from scipy (complex, with the
+    # Condon-Shortley phase) in the pole-z frame, made real and orthonormal
+    from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
+
+    inside = anglemap_disk_mask(512)
+    d, omega = anglemap_directions(512)[inside], anglemap_solid_angles(512)[inside]
+    theta, phi = np.arccos(np.clip(d[:, 2], -1, 1)), np.arctan2(d[:, 1], d[:, 0])
+    basis = []
+    for l in range(3):
+        for m in range(-l, l + 1):
+            y = sph_harm_y(l, abs(m), theta, phi)
+            basis.append(y.real if m == 0 else np.sqrt(2) * (-1) ** m * (y.real if m > 0 else y.imag))
+    independent = np.stack(basis, axis=1).T @ (light[inside].astype(np.float64) * omega[:, None])
+    assert np.abs(mine - independent).max() <= 1e-4 * np.abs(independent).max()
+    del equirect_directions, equirect_solid_angles
+
+
+def test_the_main_light_of_the_sunrise_points_at_the_sun():
+    """The sunrise's main light against the sun's centroid found on the equirect source at full resolution
+    (the energy-weighted centroid of the texels within 5 degrees of its brightest): within 1 degree."""
+    from arsim.core.conventions import equirect_directions, equirect_solid_angles
+
+    path = next(p for p in ENVMAPS if p.stem == "sunrise")
+    source = read_hdr(path)
+    h = source.shape[0]
+    d, omega = equirect_directions(h), equirect_solid_angles(h)
+    luminance = source[..., :3] @ LUMA
+    peak = d[np.unravel_index(np.argmax(luminance), luminance.shape)]
+    near = (d @ peak) > np.cos(np.radians(5.0))
+    w = (luminance * omega)[near]
+    sun = (d[near] * w[:, None]).sum(axis=0)
+    sun /= np.linalg.norm(sun)
+    direction, intensity = main_light(to_layout(source, "anglemap", 512))
+    assert np.degrees(np.arccos(np.clip(direction @ sun, -1, 1))) < 1.0
+    assert (intensity > 0).all()
+
+
+@pytest.mark.parametrize("name", ["interior", "sunrise", "city"])
+def test_the_cubemap_keeps_the_spheres_mean(name):
+    light = envmap(name, "anglemap", 512)
+    estimate = estimate_light(light)
+    faces = estimate.cubemap.astype(np.float64)
+    mean_cube = (faces * cube_solid_angles(16)[None, :, :, None]).sum(axis=(0, 1, 2)) / (4 * np.pi)
+    from arsim.core.conventions import anglemap_disk_mask, anglemap_solid_angles
+
+    inside = anglemap_disk_mask(512)
+    omega = anglemap_solid_angles(512)[inside]
+    mean_env = (light[inside].astype(np.float64) * omega[:, None]).sum(axis=0) / omega.sum()
+    assert (np.abs(mean_cube - mean_env) <= 0.01 * mean_env).all(), (mean_cube, mean_env)
+    assert np.isclose(cube_solid_angles(16).sum() * 6, 4 * np.pi)
+    assert cubemap(light).shape == (6, 16, 16, 3)
+
+
+def test_cube_texels_and_directions_agree_and_the_faces_are_where_opengl_puts_them():
+    from arsim.estimate.shapes import cube_directions, cube_texels
+
+    d = cube_directions(16)
+    face, row, col = cube_texels(d.reshape(-1, 3), 16)
+    f, r, c = np.meshgrid(np.arange(6), np.arange(16), np.arange(16), indexing="ij")
+    assert (face == f.ravel()).all() and (row == r.ravel()).all() and (col == c.ravel()).all()
+    # GL's table: +X face, s along -z, t along -y; +Y face, s along +x, t along +z
+    assert np.allclose(d[0, 0, 0], np.array([1, 1, 1]) / np.sqrt(3), atol=0.1)  # (s, t) = (-1, -1): -(-z), -(-y)
+    assert d[2, 8, 15, 0] > 0.6 and d[2, 15, 8, 2] > 0.6 and (d[2, ..., 1] > 0).all()
+    # a light bright above only: the +Y face bright, the -Y face dark
+    from arsim.core.conventions import anglemap_directions
+
+    above = np.repeat((anglemap_directions(256)[..., 1] > 0.5)[..., None], 3, axis=-1).astype(np.float32)
+    faces = cubemap(above)
+    assert faces[2].mean() > 0.5 and faces[3].max() == 0.0
+
+
+def test_the_metrics_behave_as_defined_on_known_cases():
+    """Identical renders give 0 everywhere; a uniform scale of the light gives si-RMSE 0 and angular error
+    0 but an RMSE above 0; the environment turned by 90 degrees about the vertical turns the main light by
+    the angle that turn makes with its direction (90 degrees for a light on the horizon)."""
+    from scipy.spatial.transform import Rotation
+
+    from arsim.core.conventions import anglemap_directions
+    from arsim.core.resample import sample_anglemap
+    from arsim.evaluate import light_metrics as m
+
+    rng = np.random.default_rng(3)
+    render = rng.uniform(0.1, 2.0, (32, 32, 3))
+    mask = rng.random((32, 32)) > 0.3
+    for f in (m.rmse, m.si_rmse, m.angular_error_deg):
+        assert f(render, render, mask) < 1e-9
+    assert m.sh_relative_error(render[:9, 0], render[:9, 0]) == 0.0
+    assert m.si_rmse(2.5 * render, render, mask) < 1e-9 and m.angular_error_deg(2.5 * render, render, mask) < 1e-6
+    assert m.rmse(2.5 * render, render, mask) > 1.0
+    light = envmap("sunrise", "anglemap", 512)
+    turn = Rotation.from_rotvec([0.0, np.pi / 2, 0.0]).as_matrix()
+    turned = sample_anglemap(light, anglemap_directions(512) @ turn).astype(np.float32)  # L'(d) = L(R^T d)
+    d0, _ = main_light(light)
+    d1, _ = main_light(turned)
+    expected = np.degrees(np.arccos(np.clip(d0 @ (turn @ d0), -1, 1)))
+    assert 85.0 < expected <= 90.0  # (the sun of the sunrise is near the horizon)
+    assert abs(m.direction_error_deg(d1, d0) - expected) < 1.0
+    assert m.direction_error_deg(d1, turn @ d0) < 1.0
