@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import contextlib
 import json
 import math
@@ -27,7 +28,7 @@ from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 from arsim.scenario.loader import scenario_path
-from arsim.sensors.recording import load_recording, recording_segments
+from arsim.sensors.recording import load_recording, record, recording_segments
 
 MAX_SIZE = 16384
 
@@ -213,6 +214,39 @@ def cmd_capture(args: argparse.Namespace) -> int:
              f"{metrics['orientation_rms_deg_online']:.2f} online, " if metrics["refined"] else "corrected, ")
           + f"{metrics['orientation_rms_deg_uncorrected']:.2f} uncorrected; irradiance map error "
           f"{metrics['irradiance_mean_err_pct']:.2f} %; metrics in {out / 'metrics.json'}")
+    return 0
+
+
+# arsim estimate
+
+
+def cmd_estimate(args: argparse.Namespace) -> int:
+    from arsim.estimate.series import read_estimates
+    from arsim.run.stages import estimated_sweep
+
+    source = args.source
+    given = read_estimates(args.file, 10**9) if args.file is not None else None  # bad lines fail here, first
+    if source is not None and source.is_dir():
+        rec = load_recording(source)
+        if given is not None:
+            read_estimates(args.file, len(rec.frames))  # (and frames beyond the recording's)
+        with _output(args, source, args.file) as work:
+            figures = estimated_sweep(rec, work, given, _bar)
+    else:
+        scenario = load_scenario(source)
+        recording_segments(scenario)
+        with _output(args, _scenario_file(source), args.file) as work:
+            sweep = dataclasses.replace(scenario, ar=dataclasses.replace(scenario.ar, enabled=False))
+            record(sweep, work / "recording")
+            rec = load_recording(work / "recording")
+            if given is not None:
+                read_estimates(args.file, len(rec.frames))
+            figures = estimated_sweep(rec, work, given, _bar)
+    for name, f in figures.items():
+        final = f["final"]
+        print(f"{name:<8} at the end: SH error {100 * final['sh_error']:.2f} %, main light {final['main_light_error_deg']:.2f} "
+              f"degrees off, ambient x{final['ambient_ratio']:.3f}; converged at frame {f['converged_at_frame']}")
+    print(f"wrote {args.output / 'estimates.jsonl'}, scores.json, scores.png")
     return 0
 
 
@@ -778,6 +812,21 @@ def _capture_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=cmd_capture)
 
 
+def _estimate_parser(sub: argparse._SubParsersAction) -> None:
+    p = _command(sub, "estimate", "light estimates in the shapes phones report (SH of the radiance, main light, cubemap, "
+                 "ambient intensity, colour correction) per frame of a sweep, from the truth, from the probe as the capture "
+                 "builds it, and from a file of yours, scored against the truth: estimates.jsonl, scores.json, scores.png",
+                 "arsim estimate rec -o estimates   (or: arsim estimate quick -o estimates --file mine.jsonl)")
+    p.add_argument("source", type=_path, nargs="?", metavar="SCENARIO|RECORDING",
+                   help="a recording folder, or a scenario (.toml or a bundled name) whose sweep is recorded first; default: "
+                        "the embedded default scenario")
+    _output_option(p, "output folder")
+    p.add_argument("--file", type=_path, metavar="ESTIMATES.jsonl",
+                   help="your estimates to score too: per line frame, sh_radiance (27), main_light (direction_world, "
+                        "intensity_rgb), ambient_intensity, color_correction (4)")
+    p.set_defaults(run=cmd_estimate)
+
+
 def _session_options(p: argparse.ArgumentParser, env_help: str) -> None:
     """What render and profile share: the scenario, the output folder, the light's file, the maps' size."""
     p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO",
@@ -883,7 +932,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"arsim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for add in (_info_parser, _convert_parser, _bake_parser, _bases_parser, _prt_parser, _compare_methods_parser, _record_parser,
+    for add in (_info_parser, _convert_parser, _bake_parser, _bases_parser, _prt_parser, _estimate_parser, _compare_methods_parser, _record_parser,
                 _capture_parser, _render_parser, _profile_parser, _run_parser, _batch_parser, _diff_parser, _validate_parser):
         add(sub)
     return parser

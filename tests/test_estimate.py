@@ -123,3 +123,65 @@ def test_the_metrics_behave_as_defined_on_known_cases():
     assert 85.0 < expected <= 90.0  # (the sun of the sunrise is near the horizon)
     assert abs(m.direction_error_deg(d1, d0) - expected) < 1.0
     assert m.direction_error_deg(d1, turn @ d0) < 1.0
+
+
+GOOD = {"sh_radiance": [0.1] * 27, "main_light": {"direction_world": [0.0, 1.0, 0.0], "intensity_rgb": [1.0, 1.0, 1.0]},
+        "ambient_intensity": 0.5, "color_correction": [1.0, 1.0, 1.0, 0.5]}
+
+
+def write_lines(path, lines):
+    import json
+
+    path.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    return path
+
+
+@pytest.mark.parametrize("change, fragment", [
+    (lambda ls: ls[1].pop("main_light"), 'line 2: no "main_light"'),
+    (lambda ls: ls[2].update(sh_radiance=[0.1] * 26), "line 3: sh_radiance needs 27 finite numbers (got 26"),
+    (lambda ls: ls[0].update(ambient_intensity=float("nan")), "line 1: ambient_intensity needs a finite number"),
+    (lambda ls: ls[2].update(frame=1), "line 3: frame 1 comes after frame 1"),
+    (lambda ls: ls[1]["main_light"].update(direction_world=[0.0, 0.0]), "line 2: main_light needs direction_world"),
+])
+def test_a_bad_estimates_file_is_refused_naming_the_line(tmp_path, change, fragment):
+    import copy
+
+    from arsim.core.errors import ArsimError
+    from arsim.estimate.series import read_estimates
+
+    lines = [dict(copy.deepcopy(GOOD), frame=k) for k in range(3)]
+    assert len(read_estimates(write_lines(tmp_path / "ok.jsonl", lines), 10)) == 3
+    change(lines)
+    with pytest.raises(ArsimError, match=fragment.replace("(", r"\(").replace('"', '"')):
+        read_estimates(write_lines(tmp_path / "bad.jsonl", lines), 10)
+
+
+def test_arsim_estimate_scores_the_capture_and_a_file_and_refuses_a_bad_file(tmp_path):
+    """A 2 s sweep: estimates.jsonl (a line a frame, the truth's in each, the capture's once it has a
+    snapshot, the file's where given), scores.json with the capture's and the file's scores; the file's
+    estimate is the truth's SH scaled by 2 (SH error 100 %); a file with a line of 26 SH floats: one line,
+    exit status 2, nothing written."""
+    import json
+
+    from tests.test_cli import arsim, assert_one_line_error
+
+    (tmp_path / "s.toml").write_text('[run]\nseed = 3\n[environment]\nmap = "envmaps/courtyard.exr"\nprobe_size = 128\n'
+                                     '[capture]\nduration_s = 2.0\ncapture_size = 64\n[device.camera]\nwidth = 96\n'
+                                     'height = 72\n[ar]\nenabled = false\n')
+    r = arsim("record", tmp_path / "s.toml", "-o", tmp_path / "rec")
+    assert r.returncode == 0, r.stderr
+    bad = write_lines(tmp_path / "bad.jsonl", [dict(GOOD, frame=0), dict(GOOD, frame=1, sh_radiance=[0.0] * 26)])
+    assert_one_line_error(arsim("estimate", tmp_path / "rec", "-o", tmp_path / "bad", "--file", bad),
+                          "bad.jsonl, line 2: sh_radiance needs 27")
+    assert not (tmp_path / "bad").exists()
+    # the truth's SH, doubled, as a user's estimate for every frame
+    r = arsim("estimate", tmp_path / "rec", "-o", tmp_path / "est")
+    assert r.returncode == 0, r.stderr
+    lines = [json.loads(x) for x in (tmp_path / "est" / "estimates.jsonl").read_text().splitlines()]
+    mine = [dict(GOOD, frame=line["frame"], sh_radiance=[2 * v for v in line["truth"]["sh_radiance"]],
+                 main_light=line["truth"]["main_light"]) for line in lines]
+    r = arsim("estimate", tmp_path / "rec", "-o", tmp_path / "est2", "--file", write_lines(tmp_path / "mine.jsonl", mine))
+    assert r.returncode == 0, r.stderr
+    scores = json.loads((tmp_path / "est2" / "scores.json").read_text())
+    assert abs(scores["file"]["final"]["sh_error"] - 1.0) < 1e-9 and scores["file"]["final"]["main_light_error_deg"] < 1e-6
+    assert scores["capture"]["frames"] >= 1 and "capture" in lines[-1] and len(lines) == scores["file"]["frames"]

@@ -90,6 +90,29 @@ def captured_sweep(scenario: Scenario, out: Path, size: int | None = None, align
     return measured_capture(rec, CaptureSettings.of(recording_scenario(rec), size, align_every), out, stage)
 
 
+def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, stage: Stage = quiet_stage) -> dict:
+    """Light estimates over a recording's sweep (README: Light estimation): the truth's, the capture's as its
+    probe grows, and `given` (a user's, read_estimates'); estimates.jsonl, scores.json and scores.png into
+    out; returns the scores."""
+    from arsim.estimate.series import estimate_lines
+    from arsim.evaluate.estimates import plot_scores, scores
+
+    scenario = recording_scenario(rec)
+    with stage("capturing the sweep (the capture estimate's probe)") as update:
+        result = capture(rec, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
+    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=ESTIMATE_TRUTH_SIZE))
+    with stage("estimating the light"):
+        lines = estimate_lines(np.array([f["t_ns"] for f in rec.frames]), truth, result.snapshots, given)
+        write_text_atomic(out / "estimates.jsonl", "".join(json_text(line, indent=None) for line in lines))
+        figures = scores(lines)
+        write_text_atomic(out / "scores.json", json_text(figures))
+        plot_scores(lines, out / "scores.png")
+    return figures
+
+
+ESTIMATE_TRUTH_SIZE = 512  # the true environment's angle map the truth's estimate is taken from
+
+
 def session_probe(result: CaptureResult, map_size: int) -> np.ndarray:
     """The captured probe as the maps take it: holes filled from their surroundings, map_size²."""
     acc = result.accumulator

@@ -1,0 +1,115 @@
+"""Light estimates per frame of a capture sweep, as estimates.jsonl (README: Light estimation): one JSON
+object a frame with `frame`, `t_ns` and, per estimator, its estimate's shapes (shapes.py):
+
+- `truth`: from the true environment (at infinity: the same at every position);
+- `capture`: from the probe as the capture had built it by that frame (its snapshot of the last whole
+  second: CaptureResult.snapshots; black where nothing was seen yet), so that the estimate converges over
+  the sweep;
+- `file`: read from a JSONL the user gives (their estimator's output), checked line by line.
+
+Per estimator: `sh_radiance` (27 numbers, RGB interleaved per coefficient), `main_light`
+(`direction_world`, `intensity_rgb`), `ambient_intensity`, `color_correction` (4 numbers).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from arsim.core.errors import ArsimError
+from arsim.estimate.shapes import LightEstimate, estimate_light
+
+FIELDS = {"sh_radiance": 27, "color_correction": 4}  # flat lists and their lengths
+
+
+def estimate_json(e: LightEstimate) -> dict:
+    """An estimate's shapes as the JSON object of one estimator in one line."""
+    return {"sh_radiance": [float(v) for v in e.sh_radiance.reshape(-1)],
+            "main_light": {"direction_world": [float(v) for v in e.main_light_direction],
+                           "intensity_rgb": [float(v) for v in e.main_light_intensity]},
+            "ambient_intensity": float(e.ambient_intensity),
+            "color_correction": [float(v) for v in e.color_correction]}
+
+
+def snapshot_index(snapshot_times_s: np.ndarray, t_s: float) -> int | None:
+    """The last snapshot taken at or before t_s (None: none yet)."""
+    k = int(np.searchsorted(snapshot_times_s, t_s, side="right")) - 1
+    return k if k >= 0 else None
+
+
+def estimate_lines(frame_times_ns: np.ndarray, truth: np.ndarray, snapshots: list,
+                   given: list[dict] | None = None) -> list[dict]:
+    """One dict a frame: `frame`, `t_ns`, `truth`, `capture` (absent before the first snapshot) and `file`
+    (where given: the user's line for that frame)."""
+    truth_json = estimate_json(estimate_light(truth))
+    times = np.array([t for t, _ in snapshots])
+    estimates = [estimate_json(estimate_light(light)) for _, light in snapshots]
+    start = frame_times_ns[0]
+    by_frame = {line["frame"]: line for line in given or []}
+    lines = []
+    for k, t_ns in enumerate(frame_times_ns):
+        line = {"frame": k, "t_ns": int(t_ns), "truth": truth_json}
+        s = snapshot_index(times, (t_ns - start) * 1e-9) if len(times) else None
+        if s is not None:
+            line["capture"] = estimates[s]
+        if k in by_frame:
+            line["file"] = {key: by_frame[k][key] for key in ("sh_radiance", "main_light", "ambient_intensity", "color_correction")}
+        lines.append(line)
+    return lines
+
+
+def _finite_list(value, length: int | None) -> bool:
+    return (isinstance(value, list) and (length is None or len(value) == length)
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
+
+
+def read_estimates(path: Path, frames: int) -> list[dict]:
+    """A user's estimates (JSONL: per line `frame`, and the four estimate keys) checked line by line: a
+    missing key, a number that is not finite, a list of the wrong length, a frame out of order or beyond
+    the recording's raise ArsimError naming the line."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ArsimError(f"{path}: cannot read the estimates ({exc.__class__.__name__}); give a UTF-8 JSONL file") from None
+    lines, last = [], -1
+    for number, raw in enumerate(text.splitlines(), 1):
+        if not raw.strip():
+            continue
+        where = f"{path}, line {number}"
+        try:
+            line = json.loads(raw, parse_constant=lambda name: float("nan"))
+        except ValueError as exc:
+            raise ArsimError(f"{where}: not JSON ({str(exc).splitlines()[0][:80]}); one JSON object a line") from None
+        if not isinstance(line, dict):
+            raise ArsimError(f"{where}: a line holds one JSON object (frame, sh_radiance, main_light, ...)")
+        for key in ("frame", "sh_radiance", "main_light", "ambient_intensity", "color_correction"):
+            if key not in line:
+                raise ArsimError(f"{where}: no \"{key}\"; every line needs frame, sh_radiance, main_light, "
+                                 f"ambient_intensity and color_correction")
+        frame = line["frame"]
+        if type(frame) is not int or not 0 <= frame < frames:
+            raise ArsimError(f"{where}: frame {frame!r} is not a frame of the recording (0 to {frames - 1})")
+        if frame <= last:
+            raise ArsimError(f"{where}: frame {frame} comes after frame {last}; give the frames in increasing order")
+        last = frame
+        for key, length in FIELDS.items():
+            if not _finite_list(line[key], length):
+                got = len(line[key]) if isinstance(line[key], list) else type(line[key]).__name__
+                raise ArsimError(f"{where}: {key} needs {length} finite numbers (got {got}, or one not finite)")
+        light = line["main_light"]
+        if not (isinstance(light, dict) and _finite_list(light.get("direction_world"), 3)
+                and _finite_list(light.get("intensity_rgb"), 3)):
+            raise ArsimError(f"{where}: main_light needs direction_world and intensity_rgb, 3 finite numbers each")
+        if not np.linalg.norm(light["direction_world"]) > 0:
+            raise ArsimError(f"{where}: main_light direction_world is zero; give a direction")
+        ambient = line["ambient_intensity"]
+        if not (isinstance(ambient, (int, float)) and not isinstance(ambient, bool) and math.isfinite(ambient)):
+            raise ArsimError(f"{where}: ambient_intensity needs a finite number")
+        lines.append(line)
+    if not lines:
+        raise ArsimError(f"{path}: no estimates in the file; one JSON object a line")
+    return lines

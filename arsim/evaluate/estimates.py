@@ -1,0 +1,76 @@
+"""Light estimates scored against the truth, per frame and over the sweep (README: Light estimation):
+per estimator, the SH coefficients' relative error, the main light's direction error and luminance ratio,
+the ambient intensity's ratio; at the end of the sweep, their convergence (the first frame from which the
+SH error stays within 5 % of the truth's norm of its final value) and their stability (the mean change of
+the SH from frame to frame, over the truth's norm: the true light does not change)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from arsim.evaluate.light_metrics import direction_error_deg, intensity_ratio, sh_relative_error
+
+ESTIMATORS = ("capture", "file")
+
+
+def frame_scores(line: dict, name: str) -> dict | None:
+    """One estimator's scores in one line of estimates.jsonl (None where it has no estimate there)."""
+    if name not in line:
+        return None
+    e, t = line[name], line["truth"]
+    return {"sh_error": sh_relative_error(e["sh_radiance"], t["sh_radiance"]),
+            "main_light_error_deg": direction_error_deg(e["main_light"]["direction_world"], t["main_light"]["direction_world"]),
+            "main_light_intensity_ratio": intensity_ratio(e["main_light"]["intensity_rgb"], t["main_light"]["intensity_rgb"]),
+            "ambient_ratio": e["ambient_intensity"] / max(t["ambient_intensity"], 1e-300)}
+
+
+def scores(lines: list[dict]) -> dict:
+    """Per estimator present: its final scores (at the last frame it has), the medians over its frames,
+    its convergence frame and its stability."""
+    out = {}
+    truth_norm = np.linalg.norm(lines[0]["truth"]["sh_radiance"])
+    for name in ESTIMATORS:
+        frames = [(line["frame"], frame_scores(line, name), line[name]) for line in lines if name in line]
+        if not frames:
+            continue
+        errors = np.array([s["sh_error"] for _, s, _ in frames])
+        final = errors[-1]
+        outside = np.flatnonzero(np.abs(errors - final) > 0.05)
+        converged = frames[outside[-1] + 1][0] if len(outside) and outside[-1] + 1 < len(frames) else (
+            frames[0][0] if not len(outside) else None)
+        sh = np.array([e["sh_radiance"] for _, _, e in frames])
+        steps = np.linalg.norm(np.diff(sh, axis=0), axis=1) / truth_norm if len(sh) > 1 else np.zeros(1)
+        keys = frames[0][1].keys()
+        out[name] = {"frames": len(frames), "final": frames[-1][1],
+                     "median": {k: float(np.median([s[k] for _, s, _ in frames])) for k in keys},
+                     "converged_at_frame": converged, "stability": float(np.mean(steps))}
+    return out
+
+
+def plot_scores(lines: list[dict], path) -> None:
+    """The SH error and the main light's direction error over the frames, a line per estimator."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from arsim.core.files import atomic_path
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 5.5), dpi=110, sharex=True)
+    for name in ESTIMATORS:
+        frames = [(line["frame"], frame_scores(line, name)) for line in lines if name in line]
+        if frames:
+            k = [f for f, _ in frames]
+            top.plot(k, [100 * s["sh_error"] for _, s in frames], label=name)
+            bottom.plot(k, [s["main_light_error_deg"] for _, s in frames], label=name)
+    top.set_ylabel("SH error, % of the truth's")
+    bottom.set_ylabel("main light, degrees off")
+    bottom.set_xlabel("frame of the sweep")
+    top.set_title("Light estimates against the truth")
+    top.legend()
+    top.grid(alpha=0.3)
+    bottom.grid(alpha=0.3)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)
