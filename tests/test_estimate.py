@@ -185,3 +185,25 @@ def test_arsim_estimate_scores_the_capture_and_a_file_and_refuses_a_bad_file(tmp
     scores = json.loads((tmp_path / "est2" / "scores.json").read_text())
     assert abs(scores["file"]["final"]["sh_error"] - 1.0) < 1e-9 and scores["file"]["final"]["main_light_error_deg"] < 1e-6
     assert scores["capture"]["frames"] >= 1 and "capture" in lines[-1] and len(lines) == scores["file"]["frames"]
+    assert set(scores["capture"]["spheres"]) == {"diffuse", "silver", "mirror"} and set(scores["file"]["spheres"]) == {"diffuse"}
+    assert (tmp_path / "est2" / "spheres.png").stat().st_size > 1000
+
+
+def test_the_truths_own_estimate_lights_the_spheres_as_the_truth_does():
+    """The three spheres lit by the truth's own estimate against the same lit by the truth: the diffuse
+    sphere within the SH's truncation of the cosine (a few percent), the silver and mirror within what a
+    16 x 16 cubemap holds; a light scaled by 2 gives si-RMSE 0 (to rounding) and RMSE 1 on every sphere."""
+    from arsim.estimate.shapes import estimate_light
+    from arsim.evaluate.spheres import estimate_spheres, sphere_scores, truth_spheres
+
+    light = envmap("interior", "anglemap", 256)
+    truth = truth_spheres(light)
+    e = estimate_light(light)
+    mine = estimate_spheres(e.sh_radiance, e.cubemap)
+    scores = sphere_scores(mine, truth)
+    assert scores["diffuse"]["rmse"] < 0.05 and scores["diffuse"]["angular_deg"] < 2.0, scores
+    assert scores["silver"]["rmse"] < 0.25 and scores["mirror"]["hdr_flip"] > 0.0, scores
+    doubled = sphere_scores(2 * truth, truth)
+    for name in ("diffuse", "silver", "mirror"):
+        assert doubled[name]["si_rmse"] < 1e-9 and abs(doubled[name]["rmse"] - 1.0) < 1e-9
+    assert sphere_scores(truth, truth)["mirror"]["hdr_flip"] == 0.0

@@ -74,3 +74,43 @@ def plot_scores(lines: list[dict], path) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp)
     plt.close(fig)
+
+
+def sphere_figures(figures: dict, truth: np.ndarray, lights: dict, given: dict | None, path) -> dict:
+    """The scores with each estimator's three spheres at the end of the sweep against the truth's
+    (spheres.py): the capture's from its last probe's estimate (SH and cubemap), the file's diffuse sphere
+    from its SH (a file gives no cubemap); spheres.png shows them, a row each, on the truth's exposure."""
+    from arsim.estimate.shapes import estimate_light
+    from arsim.evaluate.spheres import estimate_spheres, sphere_scores, truth_spheres
+
+    reference = truth_spheres(truth)
+    rows = {"truth": reference}
+    for name, light in lights.items():
+        e = estimate_light(light)
+        rows[name] = estimate_spheres(e.sh_radiance, e.cubemap)
+        figures[name]["spheres"] = sphere_scores(rows[name], reference)
+    if given is not None and "file" in figures:
+        mine = estimate_spheres(np.asarray(given["sh_radiance"]), np.zeros((6, 1, 1, 3)))
+        figures["file"]["spheres"] = {"diffuse": sphere_scores(mine, reference)["diffuse"]}
+        rows["file (SH only)"] = mine
+    _sphere_image(rows, path)
+    return figures
+
+
+def _sphere_image(rows: dict, path) -> None:
+    import cv2
+
+    from arsim.core.files import write_bytes_atomic
+    from arsim.core.png import png_bytes
+    from arsim.evaluate.inm_compare import srgb8
+
+    reference = rows["truth"]
+    exposures = [0.9 / max(float(np.percentile(reference[k][reference[k].max(axis=-1) > 0].max(axis=-1), 99)), 1e-12)
+                 for k in range(3)]
+    lines = []
+    for name, spheres in rows.items():
+        tile = np.concatenate([srgb8(spheres[k], exposures[k]) for k in range(3)], axis=1)
+        tile = np.ascontiguousarray(np.pad(tile, ((14, 0), (0, 0), (0, 0))))
+        cv2.putText(tile, name, (2, 11), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1, cv2.LINE_AA)
+        lines.append(tile)
+    write_bytes_atomic(path, png_bytes(np.concatenate(lines, axis=0)))

@@ -95,7 +95,7 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
     probe grows, and `given` (a user's, read_estimates'); estimates.jsonl, scores.json and scores.png into
     out; returns the scores."""
     from arsim.estimate.series import estimate_lines
-    from arsim.evaluate.estimates import plot_scores, scores
+    from arsim.evaluate.estimates import plot_scores, scores, sphere_figures
 
     scenario = recording_scenario(rec)
     with stage("capturing the sweep (the capture estimate's probe)") as update:
@@ -105,6 +105,8 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
         lines = estimate_lines(np.array([f["t_ns"] for f in rec.frames]), truth, result.snapshots, given)
         write_text_atomic(out / "estimates.jsonl", "".join(json_text(line, indent=None) for line in lines))
         figures = scores(lines)
+        final = {"capture": result.snapshots[-1][1]} if result.snapshots else {}
+        figures = sphere_figures(figures, truth, final, lines[-1].get("file"), out / "spheres.png")
         write_text_atomic(out / "scores.json", json_text(figures))
         plot_scores(lines, out / "scores.png")
     return figures
