@@ -207,3 +207,30 @@ def test_the_truths_own_estimate_lights_the_spheres_as_the_truth_does():
     for name in ("diffuse", "silver", "mirror"):
         assert doubled[name]["si_rmse"] < 1e-9 and abs(doubled[name]["rmse"] - 1.0) < 1e-9
     assert sphere_scores(truth, truth)["mirror"]["hdr_flip"] == 0.0
+
+
+def test_the_single_frame_estimator_sees_a_uniform_light_and_points_at_a_bright_patch():
+    """A frame of one code everywhere (a uniform light, linear codes): its SH is the uniform light's (every
+    direction within 1 %), its colour correction neutral; a brighter patch right of the image's centre,
+    seen by a camera turned a quarter turn: the main light points at the patch's world direction within 2°."""
+    from scipy.spatial.transform import Rotation
+
+    from arsim.core.conventions import CameraIntrinsics
+    from arsim.estimate.single_frame import SingleFrameEstimator
+    from arsim.lighting.bases.functions import sh9
+
+    camera = CameraIntrinsics.from_fov(320, 240, 60.0)
+    estimator = SingleFrameEstimator(camera)
+    linear = np.repeat(np.linspace(0.0, 1.0, 256)[:, None], 3, axis=1)
+    codes = np.full((240, 320, 3), 128, np.uint8)
+    e = estimator.estimate(codes, linear, np.eye(3))
+    d = np.random.default_rng(0).normal(size=(500, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    np.testing.assert_allclose(sh9(d) @ e.sh_radiance, linear[128][None].repeat(500, axis=0), rtol=0.01)
+    np.testing.assert_allclose(e.color_correction[:3], 1.0, atol=1e-9)
+    codes[:] = 40  # a dim room ...
+    codes[100:140, 240:280] = 249  # ... and a lamp (under the clipped codes)
+    turn = Rotation.from_rotvec([0.0, np.pi / 2, 0.0]).as_matrix()
+    e = estimator.estimate(codes, linear, turn)
+    patch = turn @ camera.unproject(np.array([259.5, 119.5]))
+    assert np.degrees(np.arccos(np.clip(e.main_light_direction @ patch, -1, 1))) < 2.0

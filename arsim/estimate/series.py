@@ -5,6 +5,7 @@ object a frame with `frame`, `t_ns` and, per estimator, its estimate's shapes (s
 - `capture`: from the probe as the capture had built it by that frame (its snapshot of the last whole
   second: CaptureResult.snapshots; black where nothing was seen yet), so that the estimate converges over
   the sweep;
+- `single`: from that frame's image alone (single_frame.py), the baseline;
 - `file`: read from a JSONL the user gives (their estimator's output), checked line by line.
 
 Per estimator: `sh_radiance` (27 numbers, RGB interleaved per coefficient), `main_light`
@@ -41,9 +42,10 @@ def snapshot_index(snapshot_times_s: np.ndarray, t_s: float) -> int | None:
 
 
 def estimate_lines(frame_times_ns: np.ndarray, truth: np.ndarray, snapshots: list,
-                   given: list[dict] | None = None) -> list[dict]:
-    """One dict a frame: `frame`, `t_ns`, `truth`, `capture` (absent before the first snapshot) and `file`
-    (where given: the user's line for that frame)."""
+                   given: list[dict] | None = None, single: list[LightEstimate] | None = None) -> list[dict]:
+    """One dict a frame: `frame`, `t_ns`, `truth`, `capture` (absent before the first snapshot), `frame`'s
+    estimate from that frame alone (where given: single_frame.py) and `file` (where given: the user's line
+    for that frame)."""
     truth_json = estimate_json(estimate_light(truth))
     times = np.array([t for t, _ in snapshots])
     estimates = [estimate_json(estimate_light(light)) for _, light in snapshots]
@@ -55,6 +57,8 @@ def estimate_lines(frame_times_ns: np.ndarray, truth: np.ndarray, snapshots: lis
         s = snapshot_index(times, (t_ns - start) * 1e-9) if len(times) else None
         if s is not None:
             line["capture"] = estimates[s]
+        if single is not None:
+            line["single"] = estimate_json(single[k])
         if k in by_frame:
             line["file"] = {key: by_frame[k][key] for key in ("sh_radiance", "main_light", "ambient_intensity", "color_correction")}
         lines.append(line)

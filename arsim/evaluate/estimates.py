@@ -10,7 +10,7 @@ import numpy as np
 
 from arsim.evaluate.light_metrics import direction_error_deg, intensity_ratio, sh_relative_error
 
-ESTIMATORS = ("capture", "file")
+ESTIMATORS = ("capture", "single", "file")
 
 
 def frame_scores(line: dict, name: str) -> dict | None:
@@ -76,17 +76,15 @@ def plot_scores(lines: list[dict], path) -> None:
     plt.close(fig)
 
 
-def sphere_figures(figures: dict, truth: np.ndarray, lights: dict, given: dict | None, path) -> dict:
+def sphere_figures(figures: dict, truth: np.ndarray, estimates: dict, given: dict | None, path) -> dict:
     """The scores with each estimator's three spheres at the end of the sweep against the truth's
-    (spheres.py): the capture's from its last probe's estimate (SH and cubemap), the file's diffuse sphere
-    from its SH (a file gives no cubemap); spheres.png shows them, a row each, on the truth's exposure."""
-    from arsim.estimate.shapes import estimate_light
+    (spheres.py): from its last estimate (LightEstimate: SH and cubemap), and the file's diffuse sphere from
+    its SH (a file gives no cubemap); spheres.png shows them, a row each, on the truth's exposure."""
     from arsim.evaluate.spheres import estimate_spheres, sphere_scores, truth_spheres
 
     reference = truth_spheres(truth)
     rows = {"truth": reference}
-    for name, light in lights.items():
-        e = estimate_light(light)
+    for name, e in estimates.items():
         rows[name] = estimate_spheres(e.sh_radiance, e.cubemap)
         figures[name]["spheres"] = sphere_scores(rows[name], reference)
     if given is not None and "file" in figures:

@@ -95,21 +95,44 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
     probe grows, and `given` (a user's, read_estimates'); estimates.jsonl, scores.json and scores.png into
     out; returns the scores."""
     from arsim.estimate.series import estimate_lines
+    from arsim.estimate.shapes import estimate_light
     from arsim.evaluate.estimates import plot_scores, scores, sphere_figures
 
     scenario = recording_scenario(rec)
     with stage("capturing the sweep (the capture estimate's probe)") as update:
         result = capture(rec, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=ESTIMATE_TRUTH_SIZE))
+    with stage("estimating the light from each frame alone") as update:
+        single = single_frame_estimates(rec, result.response, lambda f: update(completed=f))
     with stage("estimating the light"):
-        lines = estimate_lines(np.array([f["t_ns"] for f in rec.frames]), truth, result.snapshots, given)
+        lines = estimate_lines(np.array([f["t_ns"] for f in rec.frames]), truth, result.snapshots, given, single)
         write_text_atomic(out / "estimates.jsonl", "".join(json_text(line, indent=None) for line in lines))
         figures = scores(lines)
-        final = {"capture": result.snapshots[-1][1]} if result.snapshots else {}
+        final = {"capture": estimate_light(result.snapshots[-1][1])} if result.snapshots else {}
+        final["single"] = single[-1]
         figures = sphere_figures(figures, truth, final, lines[-1].get("file"), out / "spheres.png")
         write_text_atomic(out / "scores.json", json_text(figures))
         plot_scores(lines, out / "scores.png")
     return figures
+
+
+def single_frame_estimates(rec: Recording, response, progress=lambda fraction: None) -> list:
+    """Each frame's estimate from its image alone (estimate/single_frame.py), with the phone's fused
+    orientation and the recovered response over the frame's exposure."""
+    from arsim.capture.pipeline import exposure_scales, fused_camera_orientations
+    from arsim.core.png import read_frame
+    from arsim.estimate.single_frame import SingleFrameEstimator
+    from arsim.sensors.frames import recording_camera
+
+    estimator = SingleFrameEstimator(recording_camera(rec))
+    scales = exposure_scales(rec, SensorSettings.of(recording_scenario(rec).device.camera))
+    views = fused_camera_orientations(rec).as_matrix()
+    out = []
+    for k, f in enumerate(rec.frames):
+        out.append(estimator.estimate(read_frame(rec.folder / f["file"]), response.linear / scales[k], views[k]))
+        if k % 50 == 0:
+            progress(k / len(rec.frames))
+    return out
 
 
 ESTIMATE_TRUTH_SIZE = 512  # the true environment's angle map the truth's estimate is taken from
