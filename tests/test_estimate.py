@@ -187,6 +187,9 @@ def test_arsim_estimate_scores_the_capture_and_a_file_and_refuses_a_bad_file(tmp
     assert scores["capture"]["frames"] >= 1 and "capture" in lines[-1] and len(lines) == scores["file"]["frames"]
     assert set(scores["capture"]["spheres"]) == {"diffuse", "silver", "mirror"} and set(scores["file"]["spheres"]) == {"diffuse"}
     assert (tmp_path / "est2" / "spheres.png").stat().st_size > 1000
+    arcore = json.loads((tmp_path / "est2" / "platforms" / "capture_arcore.json").read_text())
+    assert len(arcore["ambientSphericalHarmonics"]) == 27 and len(arcore["cubemap"]) == 6
+    assert {"truth_arkit.json", "single_webxr.json"} <= {p.name for p in (tmp_path / "est2" / "platforms").iterdir()}
 
 
 def test_the_truths_own_estimate_lights_the_spheres_as_the_truth_does():
@@ -234,3 +237,31 @@ def test_the_single_frame_estimator_sees_a_uniform_light_and_points_at_a_bright_
     e = estimator.estimate(codes, linear, turn)
     patch = turn @ camera.unproject(np.array([259.5, 119.5]))
     assert np.degrees(np.arccos(np.clip(e.main_light_direction @ patch, -1, 1))) < 2.0
+
+
+def test_the_platforms_structures_give_back_the_irradiance_and_the_neutral_colour():
+    """ARCore's coefficients with the factors its samples premultiply them by (Y_lm's constant, the cosine's
+    convolution over pi, and its basis's signs: 0.282095, -0.325735, 0.325735, -0.325735, 0.273137,
+    -0.273137, 0.078848, -0.273137, 0.136569) and its shader's polynomials give arsim's E(n) / pi; ARKit's
+    three planes are the same numbers; a grey light is 6500 K (+-100: sRGB's white is D65)."""
+    from arsim.estimate.platforms import PLATFORMS, color_temperature_k
+    from arsim.estimate.shapes import estimate_light
+    from arsim.lighting.bases.functions import sh9
+    from arsim.lighting.bases.irradiance import COSINE_KERNEL
+
+    light = envmap("city", "anglemap", 128)
+    e = estimate_light(light)
+    n = np.random.default_rng(2).normal(size=(100, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    ours = sh9(n) @ (e.sh_radiance * COSINE_KERNEL[:, None]) / np.pi
+    factors = np.array([0.282095, -0.325735, 0.325735, -0.325735, 0.273137, -0.273137, 0.078848, -0.273137, 0.136569])
+    x, y, z = n.T
+    poly = np.stack([np.ones_like(x), y, z, x, y * x, y * z, 3 * z * z - 1, z * x, x * x - y * y], axis=1)
+    coefficients = np.array(PLATFORMS["arcore"](e)["ambientSphericalHarmonics"]).reshape(9, 3)
+    theirs = poly @ (coefficients * factors[:, None])
+    np.testing.assert_allclose(theirs, ours, rtol=1e-5, atol=1e-6 * np.abs(ours).max())
+    planes = np.array(PLATFORMS["arkit"](e)["sphericalHarmonicsCoefficients"]).reshape(3, 9)
+    np.testing.assert_allclose(planes.T, e.sh_radiance, rtol=1e-12)
+    assert len(PLATFORMS["webxr"](e)["sphericalHarmonicsCoefficients"]) == 27
+    assert abs(color_temperature_k(np.ones(3)) - 6500) < 100
+    assert color_temperature_k(np.array([1.0, 0.6, 0.3])) < 4000 < 9000 < color_temperature_k(np.array([0.6, 0.8, 1.2]))

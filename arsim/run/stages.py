@@ -92,9 +92,11 @@ def captured_sweep(scenario: Scenario, out: Path, size: int | None = None, align
 
 def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, stage: Stage = quiet_stage) -> dict:
     """Light estimates over a recording's sweep (README: Light estimation): the truth's, the capture's as its
-    probe grows, and `given` (a user's, read_estimates'); estimates.jsonl, scores.json and scores.png into
-    out; returns the scores."""
+    probe grows, each frame's alone, and `given` (a user's, read_estimates'); estimates.jsonl, scores.json,
+    scores.png, spheres.png and platforms/ (the last frame's estimates in ARCore's, ARKit's and WebXR's
+    structures) into out; returns the scores."""
     from arsim.estimate.series import estimate_lines
+    from arsim.estimate.platforms import PLATFORMS
     from arsim.estimate.shapes import estimate_light
     from arsim.evaluate.estimates import plot_scores, scores, sphere_figures
 
@@ -111,6 +113,10 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
         final = {"capture": estimate_light(result.snapshots[-1][1])} if result.snapshots else {}
         final["single"] = single[-1]
         figures = sphere_figures(figures, truth, final, lines[-1].get("file"), out / "spheres.png")
+        (out / "platforms").mkdir(exist_ok=True)
+        for name, e in {"truth": estimate_light(truth), **final}.items():  # the sweep's last frame, per platform
+            for platform, shape in PLATFORMS.items():
+                write_text_atomic(out / "platforms" / f"{name}_{platform}.json", json_text(shape(e)))
         write_text_atomic(out / "scores.json", json_text(figures))
         plot_scores(lines, out / "scores.png")
     return figures
