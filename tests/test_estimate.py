@@ -187,6 +187,13 @@ def test_arsim_estimate_scores_the_capture_and_a_file_and_refuses_a_bad_file(tmp
     assert scores["capture"]["frames"] >= 1 and "capture" in lines[-1] and len(lines) == scores["file"]["frames"]
     assert set(scores["capture"]["spheres"]) == {"diffuse", "silver", "mirror"} and set(scores["file"]["spheres"]) == {"diffuse"}
     assert (tmp_path / "est2" / "spheres.png").stat().st_size > 1000
+    # the main light in the camera's frame: the world direction turned by the phone's camera orientation
+    from arsim.capture.pipeline import fused_camera_orientations
+    from arsim.sensors.recording import load_recording
+
+    views = fused_camera_orientations(load_recording(tmp_path / "rec")).as_matrix()
+    light = lines[-1]["truth"]["main_light"]
+    np.testing.assert_allclose(views[-1] @ np.array(light["direction_camera"]), light["direction_world"], atol=1e-9)
     arcore = json.loads((tmp_path / "est2" / "platforms" / "capture_arcore.json").read_text())
     assert len(arcore["ambientSphericalHarmonics"]) == 27 and len(arcore["cubemap"]) == 6
     assert {"truth_arkit.json", "single_webxr.json"} <= {p.name for p in (tmp_path / "est2" / "platforms").iterdir()}

@@ -9,7 +9,8 @@ object a frame with `frame`, `t_ns` and, per estimator, its estimate's shapes (s
 - `file`: read from a JSONL the user gives (their estimator's output), checked line by line.
 
 Per estimator: `sh_radiance` (27 numbers, RGB interleaved per coefficient), `main_light`
-(`direction_world`, `intensity_rgb`), `ambient_intensity`, `color_correction` (4 numbers).
+(`direction_world`, `direction_camera` where the camera's orientation is known, `intensity_rgb`),
+`ambient_intensity`, `color_correction` (4 numbers).
 """
 
 from __future__ import annotations
@@ -41,11 +42,20 @@ def snapshot_index(snapshot_times_s: np.ndarray, t_s: float) -> int | None:
     return k if k >= 0 else None
 
 
+def _in_camera(estimate: dict, camera_to_world: np.ndarray) -> dict:
+    """The estimate with its main light's direction also in the camera's frame (OpenCV axes)."""
+    light = dict(estimate["main_light"])
+    light["direction_camera"] = [float(v) for v in np.asarray(camera_to_world).T @ np.asarray(light["direction_world"], dtype=np.float64)]
+    return dict(estimate, main_light=light)
+
+
 def estimate_lines(frame_times_ns: np.ndarray, truth: np.ndarray, snapshots: list,
-                   given: list[dict] | None = None, single: list[LightEstimate] | None = None) -> list[dict]:
+                   given: list[dict] | None = None, single: list[LightEstimate] | None = None,
+                   camera_to_world: np.ndarray | None = None) -> list[dict]:
     """One dict a frame: `frame`, `t_ns`, `truth`, `capture` (absent before the first snapshot), `frame`'s
     estimate from that frame alone (where given: single_frame.py) and `file` (where given: the user's line
-    for that frame)."""
+    for that frame). camera_to_world (K, 3, 3): the phone's camera orientation per frame, which adds each
+    main light's direction in the camera's frame (`direction_camera`)."""
     truth_json = estimate_json(estimate_light(truth))
     times = np.array([t for t, _ in snapshots])
     estimates = [estimate_json(estimate_light(light)) for _, light in snapshots]
@@ -61,6 +71,10 @@ def estimate_lines(frame_times_ns: np.ndarray, truth: np.ndarray, snapshots: lis
             line["single"] = estimate_json(single[k])
         if k in by_frame:
             line["file"] = {key: by_frame[k][key] for key in ("sh_radiance", "main_light", "ambient_intensity", "color_correction")}
+        if camera_to_world is not None:
+            for name in ("truth", "capture", "single", "file"):
+                if name in line:
+                    line[name] = _in_camera(line[name], camera_to_world[k])
         lines.append(line)
     return lines
 

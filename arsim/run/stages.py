@@ -96,6 +96,7 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
     scores.png, spheres.png and platforms/ (the last frame's estimates in ARCore's, ARKit's and WebXR's
     structures) into out; returns the scores."""
     from arsim.estimate.series import estimate_lines
+    from arsim.capture.pipeline import fused_camera_orientations
     from arsim.estimate.platforms import PLATFORMS
     from arsim.estimate.shapes import estimate_light
     from arsim.evaluate.estimates import plot_scores, scores, sphere_figures
@@ -107,7 +108,8 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
     with stage("estimating the light from each frame alone") as update:
         single = single_frame_estimates(rec, result.response, lambda f: update(completed=f))
     with stage("estimating the light"):
-        lines = estimate_lines(np.array([f["t_ns"] for f in rec.frames]), truth, result.snapshots, given, single)
+        views = fused_camera_orientations(rec).as_matrix()  # (the phone's camera frame: what its estimates are in)
+        lines = estimate_lines(np.array([f["t_ns"] for f in rec.frames]), truth, result.snapshots, given, single, views)
         write_text_atomic(out / "estimates.jsonl", "".join(json_text(line, indent=None) for line in lines))
         figures = scores(lines)
         final = {"capture": estimate_light(result.snapshots[-1][1])} if result.snapshots else {}
