@@ -270,3 +270,24 @@ def test_recording_again_over_a_killed_recording_replaces_it(recordings, tmp_pat
     # a temp frame alone (the writer killed after the recording was complete) is not a frame of the recording
     (rec / "frames" / ".000003.abcd.tmp.png").write_bytes(b"")
     load_recording(rec)
+
+
+def test_a_recording_names_the_bundled_assets_by_name_so_that_it_loads_with_arsim_elsewhere(tmp_path):
+    """The scenario a recording keeps (meta.json) names the bundled environment as a scenario does
+    ("envmaps/...", resolved against the assets wherever arsim is installed), not by this install's
+    absolute path; and it loads back to the same file."""
+    import json
+
+    from arsim.capture.pipeline import recording_scenario
+    from arsim.core.assets import assets_dir
+    from arsim.sensors.recording import load_recording
+    from tests.test_cli import arsim
+
+    (tmp_path / "s.toml").write_text('[environment]\nmap = "envmaps/courtyard.exr"\nprobe_size = 64\n[capture]\n'
+                                     'duration_s = 1.0\n[device.camera]\nwidth = 64\nheight = 48\n[ar]\nenabled = false\n')
+    r = arsim("record", tmp_path / "s.toml", "-o", tmp_path / "rec")
+    assert r.returncode == 0, r.stderr
+    text = json.loads((tmp_path / "rec" / "meta.json").read_text())["scenario_toml"]
+    assert 'map = "envmaps/courtyard.exr"' in text and str(assets_dir().resolve()) not in text
+    rec = load_recording(tmp_path / "rec")
+    assert recording_scenario(rec).environment.map == (assets_dir() / "envmaps" / "courtyard.exr").resolve()

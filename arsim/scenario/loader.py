@@ -60,6 +60,21 @@ def load_scenario(path: str | os.PathLike | None = None) -> Scenario:
     return parse_scenario(text, str(path), path.resolve().parent)
 
 
-def scenario_to_toml(scenario: Scenario) -> str:
-    """The scenario as resolved (defaults filled in, paths absolute), as TOML text."""
-    return tomli_w.dumps(section_to_dict(scenario))
+def scenario_to_toml(scenario: Scenario, portable: bool = False) -> str:
+    """The scenario as resolved (defaults filled in, paths absolute), as TOML text. portable: the paths to the
+    bundled assets written relative to them (as a scenario names them, "envmaps/interior.exr"), so that what
+    keeps the text (a recording's meta.json) still loads where arsim is installed elsewhere."""
+    table = section_to_dict(scenario)
+    if portable:
+        table = _relative_to(table, str(assets_dir().resolve()) + os.sep)
+    return tomli_w.dumps(table)
+
+
+def _relative_to(value, prefix: str):
+    """value (a TOML-ready dict, list or scalar) with every string that starts with prefix (a folder, with
+    its separator) cut to the rest."""
+    if isinstance(value, dict):
+        return {k: _relative_to(v, prefix) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_relative_to(v, prefix) for v in value]
+    return value[len(prefix):] if isinstance(value, str) and value.startswith(prefix) else value

@@ -296,7 +296,7 @@ def _segment_meta(scenario: Scenario, segment: _Segment, camera, mount, table_li
                    "cx": camera.cx, "cy": camera.cy, "k1": camera.k1, "k2": camera.k2, "fps": cam.fps},
         "camera_to_device": mount.as_matrix().tolist(),
         "fusion": scenario.capture.fusion,
-        "scenario_toml": scenario_to_toml(scenario),
+        "scenario_toml": scenario_to_toml(scenario, portable=True),  # (bundled assets by name: the recording moves)
     }
     if segment.table is not None:
         t = segment.table
