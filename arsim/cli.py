@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import contextlib
 import json
 import math
@@ -28,7 +27,7 @@ from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 from arsim.scenario.loader import scenario_path
-from arsim.sensors.recording import load_recording, record, recording_segments
+from arsim.sensors.recording import load_recording, recording_segments
 
 MAX_SIZE = 16384
 
@@ -222,7 +221,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
 
 def cmd_estimate(args: argparse.Namespace) -> int:
     from arsim.estimate.series import read_estimates
-    from arsim.run.stages import estimated_sweep
+    from arsim.run.stages import estimated_sweep, recorded_sweep
 
     source = args.source
     given = read_estimates(args.file, 10**9) if args.file is not None else None  # bad lines fail here, first
@@ -236,9 +235,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         scenario = load_scenario(source)
         recording_segments(scenario)
         with _output(args, _scenario_file(source), args.file) as work:
-            sweep = dataclasses.replace(scenario, ar=dataclasses.replace(scenario.ar, enabled=False))
-            record(sweep, work / "recording")
-            rec = load_recording(work / "recording")
+            rec = recorded_sweep(scenario, work / "recording", _bar)
             if given is not None:
                 read_estimates(args.file, len(rec.frames))
             figures = estimated_sweep(rec, work, given, _bar)

@@ -12,7 +12,7 @@ from arsim.lighting import prt
 from arsim.lighting.bases.functions import sh9
 from arsim.render.meshes import uv_sphere
 from arsim.render.renderer import Material
-from tests.test_render import CAMERA, EYE, KD, bumps, look_at  # noqa: F401  (fixtures below)
+from tests.test_render import EYE, KD, bumps, look_at
 from tests.test_render import gl, maps  # noqa: F401
 
 

@@ -1,7 +1,6 @@
 """The printed tags are their families' official images: tag36h11's bits against the family's published
 codes, read in AprilTag's bit layout; the corner convention against rendered frames; detectors by name."""
 
-import numpy as np
 import pytest
 
 from arsim.core.tags import TAG_FAMILIES, detector_problem

@@ -22,8 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from arsim.estimate.shapes import LightEstimate
+from arsim.lighting.bases.projection import CONDON_SHORTLEY  # (-1)^m of the nine SH
 
-CONDON_SHORTLEY = np.array([1, -1, 1, -1, 1, -1, 1, -1, 1], dtype=np.float64)  # (-1)^m of bands 0-2, index l(l+1)+m
 # linear sRGB (Rec. 709 primaries, D65) to CIE XYZ
 SRGB_TO_XYZ = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
 

@@ -26,8 +26,8 @@ import numpy as np
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, normalize
 from arsim.core.resample import to_layout
 from arsim.lighting.bases.functions import sh9
+from arsim.sensors.camera import LUMA  # Rec. 709, linear
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709, linear
 MAIN_LIGHT_SHARE = 0.5  # the main light: texels at least this share of the brightest one's luminance
 CUBE_SIZE = 16  # ARCore's environmental HDR cubemap: 16 x 16 per face
 SPLAT_SIDE = 16 * CUBE_SIZE  # the angle map's side the cubemap is summed from (at least; about 33 texels a cube texel)
@@ -78,11 +78,10 @@ _FACES = (((1, 0, 0), (0, 0, -1), (0, -1, 0)), ((-1, 0, 0), (0, 0, 1), (0, -1, 0
           ((0, 0, 1), (1, 0, 0), (0, -1, 0)), ((0, 0, -1), (-1, 0, 0), (0, -1, 0)))
 
 
-def cube_directions(size: int, supersample: int = 1) -> np.ndarray:
-    """(6, size * supersample, size * supersample, 3) unit directions at the (sub)texel centres of the six
-    faces: row r, column c at s = (c + 0.5) / M, t = (r + 0.5) / M (M = size x supersample)."""
-    m = size * supersample
-    st = (np.arange(m) + 0.5) / m * 2 - 1
+def cube_directions(size: int) -> np.ndarray:
+    """(6, size, size, 3) unit directions at the texel centres of the six faces: row r, column c at
+    s = (c + 0.5) / size, t = (r + 0.5) / size."""
+    st = (np.arange(size) + 0.5) / size * 2 - 1
     t, s = np.meshgrid(st, st, indexing="ij")
     faces = [np.asarray(major) + s[..., None] * np.asarray(sa) + t[..., None] * np.asarray(ta) for major, sa, ta in _FACES]
     return normalize(np.stack(faces).astype(np.float64))

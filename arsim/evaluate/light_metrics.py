@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])
+from arsim.sensors.camera import LUMA  # Rec. 709, linear
 
 
 def _pixels(image: np.ndarray, mask: np.ndarray | None) -> np.ndarray:

@@ -83,11 +83,16 @@ def captured_sweep(scenario: Scenario, out: Path, size: int | None = None, align
                    stage: Stage = quiet_stage) -> tuple[CaptureResult, dict]:
     """The scenario's sweep alone (no AR path) recorded into out/recording, then captured and measured as
     measured_capture does; size and align_every override [capture] where given."""
+    rec = recorded_sweep(scenario, out / "recording", stage)
+    return measured_capture(rec, CaptureSettings.of(recording_scenario(rec), size, align_every), out, stage)
+
+
+def recorded_sweep(scenario: Scenario, folder: Path, stage: Stage = quiet_stage) -> Recording:
+    """The scenario's sweep alone (no AR path) recorded into folder, loaded."""
     sweep = dataclasses.replace(scenario, ar=dataclasses.replace(scenario.ar, enabled=False))
     with stage("recording the capture sweep") as update:
-        record(sweep, out / "recording", progress=lambda f: update(completed=f))
-    rec = load_recording(out / "recording")
-    return measured_capture(rec, CaptureSettings.of(recording_scenario(rec), size, align_every), out, stage)
+        record(sweep, folder, progress=lambda f: update(completed=f))
+    return load_recording(folder)
 
 
 def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, stage: Stage = quiet_stage) -> dict:

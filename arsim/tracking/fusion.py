@@ -103,6 +103,7 @@ class PoseFilter:
                                          np.full(3, self.noise.gyro_bias ** 2), np.full(3, self.noise.accel_bias ** 2)]))
         self.t_ns = self.last_tag_ns = int(t_ns)
         self.refused, self.turned_since_tag = 0, 0.0
+        self._last_w, self._last_a = np.zeros(3), -self.R.T @ GRAVITY  # (at rest, until a sample comes)
 
     @property
     def started(self) -> bool:
@@ -122,8 +123,8 @@ class PoseFilter:
         times = np.concatenate([[self.t_ns], gyro_t[inside], [t_ns]]).astype(np.float64)
         w_samples, a_samples = gyro[inside], accel[inside]
         # each step uses the sample at its end (the last step, to t_ns, the last sample seen)
-        last_w = w_samples[-1] if len(w_samples) else self._last_w if hasattr(self, "_last_w") else np.zeros(3)
-        last_a = a_samples[-1] if len(a_samples) else self._last_a if hasattr(self, "_last_a") else -self.R.T @ GRAVITY
+        last_w = w_samples[-1] if len(w_samples) else self._last_w
+        last_a = a_samples[-1] if len(a_samples) else self._last_a
         ws = np.vstack([w_samples, last_w[None]]) if len(w_samples) else last_w[None]
         accs = np.vstack([a_samples, last_a[None]]) if len(a_samples) else last_a[None]
         n = self.noise
