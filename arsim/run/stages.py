@@ -131,17 +131,25 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
 
 def single_frame_estimates(rec: Recording, response, progress=lambda fraction: None) -> list:
     """Each frame's estimate from its image alone (estimate/single_frame.py), with the phone's fused
-    orientation and the recovered response over the frame's exposure."""
+    orientation and the recovered response over the frame's exposure. Only the metered frames are
+    estimated: the sweep's bracketed ones (darker or brighter for the response's calibration and the
+    highlights) are not what a phone's preview shows its light estimation; they keep the estimate of the
+    metered frame before them."""
     from arsim.capture.pipeline import exposure_scales, fused_camera_orientations
     from arsim.core.png import read_frame
     from arsim.estimate.single_frame import SingleFrameEstimator
     from arsim.sensors.frames import recording_camera
 
     estimator = SingleFrameEstimator(recording_camera(rec))
-    scales = exposure_scales(rec, SensorSettings.of(recording_scenario(rec).device.camera))
+    scenario = recording_scenario(rec)
+    scales = exposure_scales(rec, SensorSettings.of(scenario.device.camera))
+    bracket = scenario.capture.bracket_ev  # frame k was taken at bracket[k % len]; 0: metered
     views = fused_camera_orientations(rec).as_matrix()
     out = []
     for k, f in enumerate(rec.frames):
+        if bracket[k % len(bracket)] != 0 and out:
+            out.append(out[-1])
+            continue
         out.append(estimator.estimate(read_frame(rec.folder / f["file"]), response.linear / scales[k], views[k]))
         if k % 50 == 0:
             progress(k / len(rec.frames))
