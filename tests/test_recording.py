@@ -25,6 +25,13 @@ duration_s = 2.0
 """
 
 
+def _pixel_differences(a, b, names) -> dict:
+    """Per differing PNG: how many pixels differ once decoded (0: the same image, other bytes)."""
+    from arsim.core.png import read_frame
+
+    return {n: int((read_frame(a / n) != read_frame(b / n)).any(axis=-1).sum()) for n in names if n.endswith(".png")}
+
+
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
     root = tmp_path_factory.mktemp("recordings")
@@ -43,7 +50,7 @@ def test_same_seed_gives_byte_identical_recordings(recordings):
     files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
     assert len(files) > 60
     match, mismatch, errors = filecmp.cmpfiles(a, b, [str(f) for f in files], shallow=False)
-    assert not mismatch and not errors
+    assert not mismatch and not errors, (mismatch, errors, _pixel_differences(a, b, mismatch))
     _, differ, _ = filecmp.cmpfiles(a, c, ["imu.csv", "frames/000010.png"], shallow=False)
     assert differ == ["imu.csv", "frames/000010.png"]
 

@@ -158,7 +158,10 @@ class CameraRenderer(EnvironmentRenderer):
         p["noise_key"].value = int(key)
         self.codes.bind_to_image(0, read=False, write=True)
         p.run(-(-self.camera.width // self.GROUP), self.camera.height)
+        # Every invocation's store done before the read-back: a barrier, then a finish, as a frame whose
+        # write raced the read would differ from the same seed's in a few pixels.
         self.ctx.memory_barrier()
+        self.ctx.finish()
         data = np.frombuffer(self.codes.read(), dtype=np.uint8)
         return data.reshape(self.camera.height, self.camera.width, 4)[:, :, :3]
 
