@@ -230,7 +230,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         if given is not None:
             read_estimates(args.file, len(rec.frames))  # (and frames beyond the recording's)
         with _output(args, source, args.file) as work:
-            figures = estimated_sweep(rec, work, given, _bar)
+            figures = estimated_sweep(rec, work, given, _bar).figures
     else:
         scenario = load_scenario(source)
         recording_segments(scenario)
@@ -238,7 +238,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             rec = recorded_sweep(scenario, work / "recording", _bar)
             if given is not None:
                 read_estimates(args.file, len(rec.frames))
-            figures = estimated_sweep(rec, work, given, _bar)
+            figures = estimated_sweep(rec, work, given, _bar).figures
     for name, f in figures.items():
         final = f["final"]
         print(f"{name:<8} at the end: SH error {100 * final['sh_error']:.2f} %, main light {final['main_light_error_deg']:.2f} "

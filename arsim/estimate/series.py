@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from arsim.core.errors import ArsimError
-from arsim.estimate.shapes import LightEstimate, estimate_light
+from arsim.estimate.shapes import CUBE_SIZE, LightEstimate, cube_directions, estimate_light
+from arsim.lighting.bases.functions import sh9
 
 FIELDS = {"sh_radiance": 27, "color_correction": 4}  # flat lists and their lengths
 
@@ -34,6 +35,18 @@ def estimate_json(e: LightEstimate) -> dict:
                            "intensity_rgb": [float(v) for v in e.main_light_intensity]},
             "ambient_intensity": float(e.ambient_intensity),
             "color_correction": [float(v) for v in e.color_correction]}
+
+
+def line_estimate(line: dict) -> LightEstimate:
+    """A LightEstimate of one estimator's object in a line (a user's file line, read_estimates'); a line
+    gives no cubemap, so its cubemap is its SH's radiance (clamped at 0) at the texel centres."""
+    sh = np.asarray(line["sh_radiance"], dtype=np.float64).reshape(9, 3)
+    light = line["main_light"]
+    direction = np.asarray(light["direction_world"], dtype=np.float64)
+    faces = np.maximum(sh9(cube_directions(CUBE_SIZE).reshape(-1, 3)) @ sh, 0.0).reshape(6, CUBE_SIZE, CUBE_SIZE, 3)
+    return LightEstimate(sh, direction / np.linalg.norm(direction), np.asarray(light["intensity_rgb"], dtype=np.float64),
+                         faces.astype(np.float32), float(line["ambient_intensity"]),
+                         np.asarray(line["color_correction"], dtype=np.float64))
 
 
 def snapshot_index(snapshot_times_s: np.ndarray, t_s: float) -> int | None:

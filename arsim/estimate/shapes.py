@@ -7,10 +7,11 @@
   map's disk texels with their solid angles, in float64.
 - `main_light`: the brightest region (the texels connected to the brightest one whose luminance is at
   least MAIN_LIGHT_SHARE of its) as a direction (its energy-weighted centroid, world axes) and an RGB
-  intensity (its radiance x solid angle summed: the irradiance it gives a surface facing it).
+  intensity (its first moment along that direction, sum L w (d . l): the irradiance it gives a surface
+  facing it where it is compact, less as it spreads: main_light_intensity).
 - `cubemap` (6, N, N, 3): radiance on the faces +X, -X, +Y, -Y, +Z, -Z in OpenGL's cube-map convention
   (face texel (row r, column c) at s = (c + 0.5) / N, t = (r + 0.5) / N: cube_directions), each texel the
-  energy of the light's texels in it over its solid angle (a box filter over the sphere).
+  solid-angle weighted mean radiance of the light's texels in it (a box filter over the sphere).
 - `ambient_intensity`: the mean luminance (Rec. 709 weights) of the radiance over the sphere;
   `color_correction` (4): ARCore's ambient mode's shape, the mean radiance's RGB over its green, and the
   ambient intensity.
@@ -67,9 +68,16 @@ def main_light(anglemap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     _, labels = cv2.connectedComponents(bright, connectivity=8)
     region = labels == labels[brightest]
     weights = (luminance * anglemap_solid_angles(n))[region]
-    direction = normalize((anglemap_directions(n)[region] * weights[:, None]).sum(axis=0))
-    intensity = (light[region] * anglemap_solid_angles(n)[region][:, None]).sum(axis=0)
-    return direction, intensity
+    d = anglemap_directions(n)[region]
+    direction = normalize((d * weights[:, None]).sum(axis=0))
+    return direction, main_light_intensity(light[region], anglemap_solid_angles(n)[region], d, direction)
+
+
+def main_light_intensity(radiance: np.ndarray, omega: np.ndarray, directions: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """(3,) a region's first moment along its direction, sum L w (d . l): the irradiance it gives a surface
+    facing it where it is compact (a sun), falling to 0 as it spreads around the sphere (a uniform light
+    has no direction to give), so that it can stand as a directional light (estimate.lit)."""
+    return (radiance * (omega * (directions @ direction))[:, None]).sum(axis=0)
 
 
 # OpenGL's cube-map faces: per face its major axis and the axes s and t run along (GL spec, table 8.19)
@@ -114,18 +122,21 @@ def cube_texels(directions: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarr
 
 
 def cubemap(anglemap: np.ndarray, size: int = CUBE_SIZE) -> np.ndarray:
-    """(6, size, size, 3) float32: the light on the cube's faces, each texel the light's energy (radiance x
-    solid angle) of the angle-map texels that fall in it over the texel's solid angle: a box filter, so that
-    a small sun's energy lands whole in one texel (point samples miss it or multiply it). A light coarser
-    than SPLAT_SIDE is resampled to it first (core.resample), so that every cube texel gets many."""
+    """(6, size, size, 3) float32: the light on the cube's faces, each texel the solid-angle weighted mean
+    radiance of the angle-map texels that fall in it: a box filter, so that a small sun's energy lands in
+    one texel (point samples miss it or multiply it), and a uniform light stays uniform (dividing by the
+    texel's exact solid angle instead would make each texel as bright as the count of angle-map texels that
+    happen to fall in it: +-10 % at 512², +-23 % at 64²). A light coarser than SPLAT_SIDE is resampled to
+    it first (core.resample), so that every cube texel gets many."""
     light = np.asarray(anglemap, dtype=np.float32)[..., :3]
     if light.shape[0] < SPLAT_SIDE:
         light = to_layout(light, "anglemap", SPLAT_SIDE)
     d, radiance, omega = _disk(light)
     face, row, col = cube_texels(d, size)
-    sums = np.zeros((6, size, size, 3))
+    sums, weights = np.zeros((6, size, size, 3)), np.zeros((6, size, size))
     np.add.at(sums, (face, row, col), radiance * omega[:, None])
-    return (sums / cube_solid_angles(size)[None, :, :, None]).astype(np.float32)
+    np.add.at(weights, (face, row, col), omega)
+    return (sums / np.maximum(weights, 1e-300)[..., None]).astype(np.float32)
 
 
 def estimate_light(anglemap: np.ndarray) -> LightEstimate:

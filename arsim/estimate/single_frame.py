@@ -5,7 +5,7 @@ into world directions by the phone's own orientation (the IMU's fused one):
 - ambient intensity and colour correction: the pixels' mean;
 - SH of the radiance: the least-squares fit to the pixels' radiance at their directions, pulled towards a
   uniform light of their mean (PRIOR) where the frame does not see (most of the sphere);
-- main light: the brightest seen pixels' energy-weighted direction and energy;
+- main light: the brightest seen pixels' energy-weighted direction and their first moment along it;
 - cubemap: the seen pixels' mean per texel, the SH elsewhere.
 """
 
@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from arsim.core.conventions import CameraIntrinsics
-from arsim.estimate.shapes import LUMA, MAIN_LIGHT_SHARE, CUBE_SIZE, LightEstimate, cube_directions, cube_texels
+from arsim.estimate.shapes import (CUBE_SIZE, LUMA, MAIN_LIGHT_SHARE, LightEstimate, cube_directions, cube_texels,
+                                   main_light_intensity)
 from arsim.lighting.bases.functions import sh9
 
 GRID = 8  # every GRID-th pixel of every GRID-th row
@@ -53,7 +54,7 @@ class SingleFrameEstimator:
         w = (luminance * omega)[bright]
         direction = (d[bright] * w[:, None]).sum(axis=0)
         direction /= max(np.linalg.norm(direction), 1e-300)
-        intensity = (radiance[bright] * omega[bright][:, None]).sum(axis=0)
+        intensity = main_light_intensity(radiance[bright], omega[bright], d[bright], direction)
         faces = np.maximum(sh9(self.cube) @ sh, 0.0).reshape(6, CUBE_SIZE, CUBE_SIZE, 3)
         f, r, k = cube_texels(d, CUBE_SIZE)
         sums, weights = np.zeros((6, CUBE_SIZE, CUBE_SIZE, 3)), np.zeros((6, CUBE_SIZE, CUBE_SIZE))

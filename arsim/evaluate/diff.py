@@ -110,7 +110,7 @@ def image_pairs(a: Path, b: Path) -> tuple[list[tuple[str, Path, Path]], list[st
             [n for n in frames_a if n not in frames_b], [n for n in frames_b if n not in frames_a])
 
 
-def _magma(error: np.ndarray) -> np.ndarray:
+def magma(error: np.ndarray) -> np.ndarray:
     from matplotlib import colormaps
 
     return (255 * colormaps["magma"](np.clip(error, 0.0, 1.0))[..., :3] + 0.5).astype(np.uint8)
@@ -176,7 +176,7 @@ def run_diff(a: Path, b: Path, out_dir: Path | None = None, max_flip: float = DE
         frame, error = compare_images(read_frame(path_a), read_frame(path_b), name)
         if error is not None and out_dir is not None:
             heatmap = Path("heatmaps") / f"{Path(name).stem}.png"
-            write_bytes_atomic(out_dir / heatmap, png_bytes(_magma(error)))
+            write_bytes_atomic(out_dir / heatmap, png_bytes(magma(error)))
             frame = FrameDiff(**{**asdict(frame), "heatmap": str(heatmap)})
         result.frames.append(frame)
         progress((k + 1) / len(pairs))

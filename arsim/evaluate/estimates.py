@@ -10,7 +10,7 @@ import numpy as np
 
 from arsim.evaluate.light_metrics import direction_error_deg, intensity_ratio, sh_relative_error
 
-ESTIMATORS = ("capture", "single", "file")
+ESTIMATORS = ("capture", "single", "file")  # (and the truth's own estimate, where the AR objects are lit by it)
 
 
 def frame_scores(line: dict, name: str) -> dict | None:
@@ -78,19 +78,20 @@ def plot_scores(lines: list[dict], path) -> None:
 
 def sphere_figures(figures: dict, truth: np.ndarray, estimates: dict, given: dict | None, path) -> dict:
     """The scores with each estimator's three spheres at the end of the sweep against the truth's
-    (spheres.py): from its last estimate (LightEstimate: SH and cubemap), and the file's diffuse sphere from
-    its SH (a file gives no cubemap); spheres.png shows them, a row each, on the truth's exposure."""
+    (spheres.py): from its last estimate (LightEstimate: SH, main light and cubemap), and the file's diffuse
+    sphere from its SH and main light (a file gives no cubemap); spheres.png shows them, a row each, on the truth's exposure."""
     from arsim.evaluate.spheres import estimate_spheres, sphere_scores, truth_spheres
 
     reference = truth_spheres(truth)
     rows = {"truth": reference}
     for name, e in estimates.items():
-        rows[name] = estimate_spheres(e.sh_radiance, e.cubemap)
+        rows[name] = estimate_spheres(e.sh_radiance, e.main_light_direction, e.main_light_intensity, e.cubemap)
         figures[name]["spheres"] = sphere_scores(rows[name], reference)
     if given is not None and "file" in figures:
-        mine = estimate_spheres(np.asarray(given["sh_radiance"]), np.zeros((6, 1, 1, 3)))
+        light = given["main_light"]
+        mine = estimate_spheres(np.asarray(given["sh_radiance"]), light["direction_world"], light["intensity_rgb"], None)
         figures["file"]["spheres"] = {"diffuse": sphere_scores(mine, reference)["diffuse"]}
-        rows["file (SH only)"] = mine
+        rows["file (no cubemap)"] = mine
     _sphere_image(rows, path)
     return figures
 
@@ -112,3 +113,66 @@ def _sphere_image(rows: dict, path) -> None:
         cv2.putText(tile, name, (2, 11), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1, cv2.LINE_AA)
         lines.append(tile)
     write_bytes_atomic(path, png_bytes(np.concatenate(lines, axis=0)))
+
+
+def estimate_summary(figures: dict, ar_scores: dict) -> dict:
+    """metrics.json's `estimates`: per estimator its scores at the sweep's end (SH error, main light, ambient,
+    diffuse and mirror spheres), its convergence and stability, and the FLIP of the AR objects lit by it
+    against the truth frame (the mean over the frames shown, and per frame)."""
+    out = {}
+    for name in ("truth", *ESTIMATORS):
+        f = figures.get(name)
+        scored = ar_scores.get(name, {})
+        if f is None and not scored:
+            continue
+        row = {}
+        if f is not None:
+            spheres = f.get("spheres", {})
+            row = dict(f["final"], converged_at_frame=f["converged_at_frame"], stability=f["stability"],
+                       diffuse_sphere_rmse=spheres.get("diffuse", {}).get("rmse"),
+                       mirror_sphere_hdr_flip=spheres.get("mirror", {}).get("hdr_flip"))
+        if scored:
+            row["ar_flip_mean"] = float(np.mean(list(scored.values())))
+            row["ar_flip_per_frame"] = {str(k): v for k, v in sorted(scored.items())}
+        out[name] = row
+    return out
+
+
+CROP_MARGIN = 24  # pixels around the objects in the frames compared
+CROP_HEIGHT = 180  # the crops' height in estimates/frames/*.png
+
+
+def write_estimate_frames(frames: dict, folder) -> list:
+    """Per frame shown (render.session's estimate_frames): a PNG of the objects' region in the truth frame
+    and lit by each estimate, the FLIP error of each below it (magma, 0 to 1) with its mean over the objects;
+    returns the paths written."""
+    import cv2
+
+    from arsim.core.files import write_bytes_atomic
+    from arsim.core.png import png_bytes
+    from arsim.evaluate.diff import magma, flip_map
+
+    written = []
+    for k, shown in sorted(frames.items()):
+        folder.mkdir(parents=True, exist_ok=True)
+        mask, truth = shown["mask"], shown["truth_frame"]
+        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        box = (slice(max(rows[0] - CROP_MARGIN, 0), rows[-1] + CROP_MARGIN + 1),
+               slice(max(cols[0] - CROP_MARGIN, 0), cols[-1] + CROP_MARGIN + 1))
+        scale = CROP_HEIGHT / (box[0].stop - box[0].start)
+        size = (max(int(round((box[1].stop - box[1].start) * scale)), 1), CROP_HEIGHT)
+
+        def tile(image, label):
+            t = np.ascontiguousarray(np.pad(cv2.resize(image[box], size, interpolation=cv2.INTER_NEAREST), ((16, 0), (0, 4), (0, 0))))
+            cv2.putText(t, label, (3, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
+            return t
+
+        top, bottom = [tile(truth, "truth frame")], [tile(np.repeat(mask[..., None], 3, axis=-1).astype(np.uint8) * 255, "objects' mask")]
+        for name, image in shown["lit"].items():
+            error = flip_map(truth, image, mask)
+            top.append(tile(image, f"{name}'s estimate"))
+            bottom.append(tile(magma(error), f"FLIP {float(error[mask].mean()):.4f}"))
+        path = folder / f"{k:06d}.png"
+        write_bytes_atomic(path, png_bytes(np.concatenate([np.concatenate(top, axis=1), np.concatenate(bottom, axis=1)], axis=0)))
+        written.append(path)
+    return written

@@ -1,7 +1,7 @@
 """The lighting-estimation literature's three spheres (README: Light estimation): diffuse, matte silver
-and mirror, seen orthographically from +z (image right +x, up +y), lit by a light estimate (its SH for
-the diffuse sphere, its cubemap for the two others) or by the true light (its angle map), in NumPy, linear
-radiance. Scored with light_metrics over the spheres' disks and HDR-FLIP on the mirror.
+and mirror, seen orthographically from +z (image right +x, up +y), lit by a light estimate (its SH ambient
+and main light for the diffuse sphere, its cubemap for the two others: estimate.lit) or by the true light
+(its angle map), in NumPy, linear radiance. Scored with light_metrics over the spheres' disks and HDR-FLIP on the mirror.
 """
 
 from __future__ import annotations
@@ -10,9 +10,8 @@ import numpy as np
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.core.resample import sample_anglemap, to_layout
-from arsim.estimate.shapes import cube_directions, cube_solid_angles
-from arsim.lighting.bases.functions import sh9
-from arsim.lighting.bases.irradiance import COSINE_KERNEL
+from arsim.estimate.lit import irradiance, lobe_average, lobe_average_of
+from arsim.estimate.shapes import cube_texels
 
 SIZE = 64  # pixels across each sphere
 ALBEDO = 0.8  # the diffuse sphere's
@@ -33,12 +32,6 @@ def sphere_geometry(size: int = SIZE) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return mask, n, mirror
 
 
-def _lobes(directions: np.ndarray, samples: np.ndarray, weighted: np.ndarray, weights: np.ndarray, exponent: float) -> np.ndarray:
-    """Normalised Phong lobe averages sum L w max(0, d . s)^e / sum w max(0, d . s)^e at directions (P, 3)."""
-    lobe = np.maximum(directions @ samples.T, 0.0) ** exponent * weights[None]
-    return (lobe @ weighted) / np.maximum(lobe.sum(axis=1), 1e-300)[:, None]
-
-
 def truth_spheres(anglemap: np.ndarray, size: int = SIZE) -> np.ndarray:
     """(3, S, S, 3): the three spheres lit by an angle-map light: the diffuse one by the exact cosine sum,
     the silver by the lobe average, the mirror by a bilinear lookup (0 off the disks)."""
@@ -48,28 +41,25 @@ def truth_spheres(anglemap: np.ndarray, size: int = SIZE) -> np.ndarray:
     d, radiance, omega = anglemap_directions(LIGHT_SIDE)[inside], light[inside].astype(np.float64), anglemap_solid_angles(LIGHT_SIDE)[inside]
     out = np.zeros((3, size, size, 3))
     out[0][mask] = ALBEDO / np.pi * (np.maximum(n[mask] @ d.T, 0.0) @ (radiance * omega[:, None]))
-    out[1][mask] = _lobes(mirror[mask], d, radiance, omega, SILVER_EXPONENT)
+    out[1][mask] = lobe_average_of(d, radiance, omega, mirror[mask], SILVER_EXPONENT)
     out[2][mask] = sample_anglemap(np.asarray(anglemap, dtype=np.float32)[..., :3], mirror[mask])
     return out
 
 
-def estimate_spheres(sh_radiance: np.ndarray, cubemap: np.ndarray, size: int = SIZE) -> np.ndarray:
-    """(3, S, S, 3): the three spheres lit by an estimate: the diffuse one by its SH (E = sum A_l L_lm Y_lm),
-    the silver by the lobe average over its cubemap's texels, the mirror by its cubemap's texel in the
-    mirror direction (nearest: the cubemap is what the platform gives)."""
-    from arsim.estimate.shapes import cube_texels
-
+def estimate_spheres(sh_radiance: np.ndarray, main_direction: np.ndarray, main_intensity: np.ndarray,
+                     cubemap: np.ndarray | None, size: int = SIZE) -> np.ndarray:
+    """(3, S, S, 3): the three spheres lit by an estimate as a renderer lights with it (estimate.lit): the
+    diffuse one by its SH ambient and main light, the silver by the lobe average over its cubemap's texels,
+    the mirror by its cubemap's texel in the mirror direction (nearest: the cubemap is what the platform
+    gives); no cubemap (a file's estimate): the silver and mirror spheres black."""
     mask, n, mirror = sphere_geometry(size)
-    sh = np.asarray(sh_radiance, dtype=np.float64).reshape(9, 3)
-    faces = np.asarray(cubemap, dtype=np.float64)
-    side = faces.shape[1]
-    d = cube_directions(side).reshape(-1, 3)
-    omega = np.tile(cube_solid_angles(side).reshape(-1), 6)
     out = np.zeros((3, size, size, 3))
-    out[0][mask] = ALBEDO / np.pi * np.maximum(sh9(n[mask]) @ (sh * COSINE_KERNEL[:, None]), 0.0)
-    out[1][mask] = _lobes(mirror[mask], d, faces.reshape(-1, 3), omega, SILVER_EXPONENT)
-    f, r, c = cube_texels(mirror[mask], side)
-    out[2][mask] = faces[f, r, c]
+    out[0][mask] = ALBEDO / np.pi * irradiance(sh_radiance, main_direction, main_intensity, n[mask])
+    if cubemap is not None:
+        faces = np.asarray(cubemap, dtype=np.float64)
+        out[1][mask] = lobe_average(faces, mirror[mask], SILVER_EXPONENT)
+        f, r, c = cube_texels(mirror[mask], faces.shape[1])
+        out[2][mask] = faces[f, r, c]
     return out
 
 

@@ -64,6 +64,10 @@ class SessionResult:
     step_ms: dict[str, list[float]] = field(default_factory=dict)  # CPU ms per step per frame
     gl_ms: dict[str, list[float]] = field(default_factory=dict)  # GL ms per GL step per frame
     records: list = field(default_factory=list)  # the render loop's FrameRecord per frame (the profile's input)
+    # At the saved frames where the tag was found: the truth frame, the objects' mask and the frame lit by each
+    # light estimate; and per estimator its score against the truth frame there.
+    estimate_frames: dict = field(default_factory=dict)  # frame index -> {"truth_frame", "mask", "lit": {estimator: frame}}
+    estimate_scores: dict = field(default_factory=dict)  # estimator -> {frame index: score}
 
 
 def maps_needed(objects: Sequence[SceneObject], method: str) -> dict[str, list[float]]:
@@ -109,17 +113,21 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                 out_dir: Path,
                 objects: list[SceneObject], score: Scorer, settings: SessionSettings = SessionSettings(),
                 truth_objects: list[SceneObject] | None = None,
-                progress: Callable[[float], None] = lambda fraction: None) -> SessionResult:
+                progress: Callable[[float], None] = lambda fraction: None,
+                estimates: dict[str, tuple[dict[str, MapSet], list[SceneObject]]] | None = None) -> SessionResult:
     """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
     (a set per method: from the captured probe, or baked before) and truth frames lit by
     `truth_maps` (the same from the true environment), each frame scored against its truth frame by
     `score`; writes frames/*.png and session.mp4 into out_dir. truth_objects: the objects as the truth
     frames show them, where their directional light maps were baked from the true environment
-    (light_objects); default: `objects`."""
+    (light_objects); default: `objects`. estimates: per light estimator, its maps and objects (estimate.lit);
+    at the saved frames the objects are also rendered lit by each, scored against the truth frame likewise."""
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code, settings)
     captured = _renderer(camera, maps, ctx, settings.method, objects)
     true_light = _renderer(camera, truth_maps, ctx, settings.method, objects if truth_objects is None else truth_objects)
+    estimated = {name: _renderer(camera, m, ctx, settings.method, o) for name, (m, o) in (estimates or {}).items()}
+    estimate_frames, estimate_scores = {}, {name: {} for name in estimated}
     indices = np.arange(0, len(rec.frames), settings.every)
     count = len(indices)
     saved = set(settings.saved_frames or indices[np.linspace(0, count - 1, 4).round().astype(int)].tolist())
@@ -149,23 +157,39 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
             step_ms["readback"].append(1000 * (time.perf_counter() - start))
             if pose.found and (n % settings.flip_every == 0 or k in saved):
                 start = time.perf_counter()
-                true_light.render_objects(Rotation.from_matrix(pose.rotation), pose.translation, time_s)
-                true_light.background_pass(frame)
-                true_light.tonemap_pass(settings.key, settings.white, settings.log_average)
-                truth_frame = true_light.read_output()
-                if overlay_box is not None:  # the same overlay pixels on both (FLIP's filters reach past its
-                    truth_frame = truth_frame.copy()  # box), and those pixels left out: not the objects' light
-                    truth_frame[overlay_box] = out[overlay_box]
+                # (the same overlay pixels on both, as FLIP's filters reach past its box, and those pixels left
+                # out of the mask: they are not the objects' light)
+                truth_frame = _lit_frame(true_light, pose, time_s, frame, settings, overlay_box, out)
+                if overlay_box is not None:
                     mask[overlay_box] = False
                 flips[n] = score(truth_frame, out, mask) if mask.any() else np.nan
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
+                if estimated and k in saved and mask.any():
+                    lit = {name: _lit_frame(r, pose, time_s, frame, settings, overlay_box, out) for name, r in estimated.items()}
+                    estimate_frames[int(k)] = {"truth_frame": truth_frame, "mask": mask, "lit": lit}
+                    for name, image in lit.items():
+                        estimate_scores[name][int(k)] = score(truth_frame, image, mask)
             video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))
             if k in saved:
                 write_bytes_atomic(out_dir / "frames" / f"{k:06d}.png", png_bytes(out))
             if n % 10 == 0 or n == count - 1:
                 progress((n + 1) / count)
         video.release()
-    return SessionResult(indices, poses, flips, step_ms, gl_ms, records)
+    return SessionResult(indices, poses, flips, step_ms, gl_ms, records, estimate_frames, estimate_scores)
+
+
+def _lit_frame(renderer: Renderer, pose: TagPose, time_s: float, frame: np.ndarray, settings: SessionSettings,
+               overlay_box, shown: np.ndarray) -> np.ndarray:
+    """The camera frame with the objects drawn at the pose by a renderer of other light (the truth's, an
+    estimate's), tone mapped as the session's; the overlay's pixels copied from the frame shown."""
+    renderer.render_objects(Rotation.from_matrix(pose.rotation), pose.translation, time_s)
+    renderer.background_pass(frame)
+    renderer.tonemap_pass(settings.key, settings.white, settings.log_average)
+    out = renderer.read_output()
+    if overlay_box is not None:
+        out = out.copy()
+        out[overlay_box] = shown[overlay_box]
+    return out
 
 
 def frame_time_s(rec: Recording, k: int) -> float:

@@ -29,7 +29,7 @@ from arsim.evaluate.metrics import map_error
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
-STAGES = ("recording", "capture", "maps", "session", "report")
+STAGES = ("recording", "capture", "estimates", "maps", "session", "report")
 
 
 def _files_under(out: Path, roles: dict[str, str]) -> list[dict]:
@@ -50,6 +50,7 @@ FILE_ROLES = {
     "capture/env.exr": "the captured HDR light probe (angle map)",
     "capture/truth.exr": "the true environment at the probe's size",
     "capture": "capture metrics and plots",
+    "estimates": "light estimates in the platforms' shapes, scored; the objects lit by each (frames/)",
     "maps": "maps baked from the captured probe, a folder per method",
     "frames": "frames rendered by the AR session",
     "session.mp4": "the AR session's video",
@@ -80,6 +81,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     """Run every stage into out; returns the manifest (also written to out/manifest.json)."""
     from arsim.capture.pipeline import CaptureSettings, recording_scenario
     from arsim.evaluate.diff import masked_flip
+    from arsim.evaluate.estimates import estimate_summary, write_estimate_frames
     from arsim.evaluate.profile import ProfileRun, write_profile
     from arsim.evaluate.session import session_metrics
     from arsim.lighting.bake_output import write_bake
@@ -88,7 +90,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, maps_needed, run_session
     from arsim.run.report import write_report
-    from arsim.run.stages import with_scenario, measured_capture, session_probe
+    from arsim.run.stages import estimate_lights, estimated_sweep, measured_capture, session_probe, with_scenario
     from arsim.scenario.environment import load_environment
     from arsim.sensors.recording import load_recording, record, recording_segments
 
@@ -112,7 +114,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     # 1. The recording: made now, or one made before (`arsim record`) replayed.
     if recording is None:
         recording_segments(scenario)
-        with step("recording", "1/5 recording the sweep and the AR path") as update:
+        with step("recording", "1/6 recording the sweep and the AR path") as update:
             record(scenario, out / "recording", progress=lambda f: update(completed=f))
         recording = out / "recording"
     elif not (recording / "ar").is_dir():
@@ -123,9 +125,14 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     # 2. The capture, measured against the truth.
     result, capture_metrics = measured_capture(sweep, CaptureSettings.of(recorded), out / "capture",
                                                lambda description: step("capture", description),
-                                               "2/5 capturing the light probe")
+                                               "2/6 capturing the light probe")
 
-    # 3. The maps of every method named, from the captured probe; each measured against the same method's
+    # 3. The light estimates over the sweep (the truth's, the capture's as it grew, each frame's alone), scored.
+    with step("estimates", "3/6 estimating the light as phones report it"):
+        (out / "estimates").mkdir(exist_ok=True)
+        estimates = estimated_sweep(sweep, out / "estimates", result=result)
+
+    # 4. The maps of every method named, from the captured probe; each measured against the same method's
     # maps of the true environment (what the capture costs) and the true environment's accurate maps.
     probe = session_probe(result, r.map_size)
     truth = load_environment(dataclasses.replace(recorded.environment, probe_size=r.map_size))
@@ -134,7 +141,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     methods = list(dict.fromkeys([*needed, *r.methods]))
     maps, truth_maps, map_metrics = {}, {}, {}
     inside = anglemap_disk_mask(r.map_size)
-    with step("maps", f"3/5 baking the maps ({', '.join(methods)})") as update:
+    with step("maps", f"4/6 baking the maps ({', '.join(methods)})") as update:
         params = MapParameters()
         # accurate and bounds on the GL path: NumPy's float64 sums take half a minute at 128².
         gl = create_gl_context()
@@ -157,22 +164,26 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             update(completed=(k + 1) / len(methods))
         gl.release()
 
-    # 4. The AR session over the AR path, and its render-loop profile.
+    # 5. The AR session over the AR path (the objects also lit by each light estimate at the frames shown),
+    # and its render-loop profile.
     session_settings = with_scenario(SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay,
                                                      flip_every=r.flip_every), scenario, [light for _, light in result.snapshots])
-    with step("session", "4/5 rendering the AR session") as update:
+    with step("session", "5/6 rendering the AR session") as update:
         session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe),
                               masked_flip, session_settings, truth_objects=light_objects(objects, truth),
-                              progress=lambda f: update(completed=f))
+                              progress=lambda f: update(completed=f),
+                              estimates=estimate_lights(estimates.final, needed, objects, r.map_size))
     (out / "profile").mkdir(exist_ok=True)
     write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")
 
-    # 5. Metrics, report and manifest.
+    # 6. Metrics, report and manifest.
     tracking, session_figures = session_metrics(ar, session)
     metrics = {"capture": {k: v for k, v in capture_metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
+               "estimates": estimate_summary(estimates.figures, session.estimate_scores),
                "maps": map_metrics, "session": session_figures}
     write_text_atomic(out / "metrics.json", json_text(metrics))
-    with step("report", "5/5 writing the report") as update:
+    with step("report", "6/6 writing the report") as update:
+        write_estimate_frames(session.estimate_frames, out / "estimates" / "frames")
         write_report(out, scenario, source, metrics, tracking, session.frames, maps)
     manifest = {
         "scenario": {"source": source, "name": scenario.run.name, "resolved": "scenario.toml"},

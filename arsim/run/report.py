@@ -63,6 +63,39 @@ def plot_tracking(t: TrackingRun, frames: np.ndarray, path: Path) -> None:
     plt.close(fig)
 
 
+ESTIMATE_COLUMNS = (("sh_error", "SH error, % of the truth's", 100, 1), ("main_light_error_deg", "main light, degrees off", 1, 1),
+                    ("main_light_intensity_ratio", "main light intensity, x truth", 1, 2), ("ambient_ratio", "ambient, x truth", 1, 2),
+                    ("diffuse_sphere_rmse", "diffuse sphere RMSE, %", 100, 1), ("mirror_sphere_hdr_flip", "mirror sphere HDR-FLIP", 1, 3),
+                    ("converged_at_frame", "converged at frame", 1, 0), ("stability", "change a frame, %", 100, 2),
+                    ("ar_flip_mean", "AR objects' FLIP vs truth frame", 1, 4))
+
+
+def _estimates_section(out: Path, estimates: dict) -> str:
+    """The light estimates: their scores at the sweep's end, the spheres, the scores over the sweep and the AR
+    objects lit by each estimate beside the truth frame."""
+    if not estimates:
+        return ""
+    rows = [[name] + ["n/a" if e.get(key) is None else _num(e[key] * scale, digits) for key, _, scale, digits in ESTIMATE_COLUMNS]
+            for name, e in estimates.items()]
+    folder = out / "estimates"
+    frames = "".join(f"<figure>{_img(f, f.name)}<figcaption>AR frame {int(f.stem)}</figcaption></figure>"
+                     for f in sorted((folder / "frames").glob("*.png")))
+    return f"""<h2 id="estimates">Light estimates as phones report them</h2>
+<p>What ARCore, ARKit and WebXR give an app instead of a probe (SH of the radiance, a main light, a 16 x 16 cubemap,
+an ambient intensity), estimated over the sweep by the capture (from its probe as it grew) and from each frame alone
+(<code>single</code>), scored against the truth's own estimate at the sweep's end (estimates/scores.json; every frame's
+estimates in estimates/estimates.jsonl, the platforms' structures in estimates/platforms/). The AR objects are lit by each
+estimate as a renderer lights with it: the SH ambient and the main light as a directional light for diffuse, the
+cubemap for reflections.</p>
+{_table(['estimator'] + [label for _, label, _, _ in ESTIMATE_COLUMNS], rows)}
+<h3>The three spheres (diffuse, matte silver, mirror), lit by each estimate and by the truth</h3>
+{_img(folder / 'spheres.png', 'spheres', 400)}
+<h3>Scores over the sweep</h3>{_img(folder / 'scores.png', 'scores over the sweep', 900)}
+<h3>The AR objects lit by each estimate, beside the truth frame (FLIP over the objects below)</h3>
+<div class="row">{frames}</div>
+"""
+
+
 def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, tracking: TrackingRun, frames: np.ndarray,
                  maps: dict[str, MapSet]) -> Path:
     report = out / "report"
@@ -88,6 +121,7 @@ def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, trac
                       f"{_num(flip_of.get(int(f.stem)), 4) if flip_of.get(int(f.stem)) is not None else 'n/a (no object drawn)'}"
                       f"</figcaption></figure>" for f in frames)
     lost = s.get("frames_lost", 0)
+    estimates = _estimates_section(out, metrics.get("estimates", {}))
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>arsim run: {html.escape(scenario.run.name)}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1200px}} table{{border-collapse:collapse;margin:0.5em 0}}
@@ -98,11 +132,12 @@ nav a{{margin-right:1em}}</style></head>
 <p>Scenario {html.escape(source)}, seed {scenario.run.seed}. The AR session rendered {s['frames_total']} frames; the tag was
 lost in {lost} of them (no object drawn there). FLIP against the truth frame: {_num(s.get('flip_mean'), 4)}, the mean over
 {s.get('flip_frames')} frames ({'every' if scenario.render.flip_every == 1 else f'every {scenario.render.flip_every}th'} frame with objects, and the frames shown).</p>
-<nav><a href="#scenario">scenario</a><a href="#capture">capture</a><a href="#maps">maps</a><a href="#frames">frames</a>
+<nav><a href="#scenario">scenario</a><a href="#capture">capture</a><a href="#estimates">light estimates</a><a href="#maps">maps</a><a href="#frames">frames</a>
 <a href="#errors">errors</a><a href="#plots">drift, tracking, frame time</a></nav>
 <h2 id="scenario">Scenario</h2><pre>{html.escape(scenario_to_toml(scenario))}</pre>
 <h2 id="capture">Captured probe and the truth</h2>{_img(out / 'capture' / 'probe_vs_truth.png', 'probe vs truth', 1100)}
 {_img(out / 'capture' / 'coverage.png', 'coverage', 500)}
+{estimates}
 <h2 id="maps">Maps per method</h2><p>Baked from the captured probe (maps/&lt;method&gt;/), each shown by Reinhard's operator.</p>
 {_img(report / 'maps.png', 'maps', 1100)}
 <h2 id="frames">Frames</h2><div class="row">{figures}</div>

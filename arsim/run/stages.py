@@ -95,20 +95,28 @@ def recorded_sweep(scenario: Scenario, folder: Path, stage: Stage = quiet_stage)
     return load_recording(folder)
 
 
-def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, stage: Stage = quiet_stage) -> dict:
+@dataclasses.dataclass(frozen=True)
+class SweepEstimates:
+    figures: dict  # scores.json's content
+    final: dict  # estimator -> its LightEstimate at the sweep's end (what the app carries into the AR session), truth's too
+
+
+def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, stage: Stage = quiet_stage,
+                    result: CaptureResult | None = None) -> SweepEstimates:
     """Light estimates over a recording's sweep (README: Light estimation): the truth's, the capture's as its
     probe grows, each frame's alone, and `given` (a user's, read_estimates'); estimates.jsonl, scores.json,
     scores.png, spheres.png and platforms/ (the last frame's estimates in ARCore's, ARKit's and WebXR's
-    structures) into out; returns the scores."""
-    from arsim.estimate.series import estimate_lines
+    structures) into out. result: the sweep's capture where it was made before (else it is made here)."""
+    from arsim.estimate.series import estimate_lines, line_estimate
     from arsim.capture.pipeline import fused_camera_orientations
     from arsim.estimate.platforms import PLATFORMS
     from arsim.estimate.shapes import estimate_light
     from arsim.evaluate.estimates import plot_scores, scores, sphere_figures
 
     scenario = recording_scenario(rec)
-    with stage("capturing the sweep (the capture estimate's probe)") as update:
-        result = capture(rec, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
+    if result is None:
+        with stage("capturing the sweep (the capture estimate's probe)") as update:
+            result = capture(rec, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=ESTIMATE_TRUTH_SIZE))
     with stage("estimating the light from each frame alone") as update:
         single = single_frame_estimates(rec, result.response, lambda f: update(completed=f))
@@ -121,12 +129,24 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
         final["single"] = single[-1]
         figures = sphere_figures(figures, truth, final, lines[-1].get("file"), out / "spheres.png")
         (out / "platforms").mkdir(exist_ok=True)
-        for name, e in {"truth": estimate_light(truth), **final}.items():  # the sweep's last frame, per platform
+        final = {"truth": estimate_light(truth), **final}  # (what a perfect estimator reports: the shapes' own limit)
+        for name, e in final.items():  # the sweep's last frame, per platform
             for platform, shape in PLATFORMS.items():
                 write_text_atomic(out / "platforms" / f"{name}_{platform}.json", json_text(shape(e)))
         write_text_atomic(out / "scores.json", json_text(figures))
         plot_scores(lines, out / "scores.png")
-    return figures
+    if given:
+        final["file"] = line_estimate(given[-1])
+    return SweepEstimates(figures, final)
+
+
+def estimate_lights(final: dict, needed: dict[str, list[float]], objects: list, map_size: int) -> dict:
+    """Per estimator, the maps and objects its estimate lights the AR session's objects with (estimate.lit:
+    the maps from its SH, main light and cubemap; what is baked from a light, from its cubemap)."""
+    from arsim.estimate.lit import environment, estimate_maps
+
+    return {name: (estimate_maps(e, needed, map_size, f"{name} estimate"), light_objects(objects, environment(e, map_size)))
+            for name, e in final.items()}
 
 
 def single_frame_estimates(rec: Recording, response, progress=lambda fraction: None) -> list:
