@@ -22,8 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from arsim.core.errors import ArsimError
-from arsim.estimate.shapes import CUBE_SIZE, LightEstimate, cube_directions, estimate_light
-from arsim.lighting.bases.functions import sh9
+from arsim.estimate.shapes import LightEstimate, estimate_light, sh_cubemap
 
 FIELDS = {"sh_radiance": 27, "color_correction": 4}  # flat lists and their lengths
 
@@ -43,9 +42,8 @@ def line_estimate(line: dict) -> LightEstimate:
     sh = np.asarray(line["sh_radiance"], dtype=np.float64).reshape(9, 3)
     light = line["main_light"]
     direction = np.asarray(light["direction_world"], dtype=np.float64)
-    faces = np.maximum(sh9(cube_directions(CUBE_SIZE).reshape(-1, 3)) @ sh, 0.0).reshape(6, CUBE_SIZE, CUBE_SIZE, 3)
     return LightEstimate(sh, direction / np.linalg.norm(direction), np.asarray(light["intensity_rgb"], dtype=np.float64),
-                         faces.astype(np.float32), float(line["ambient_intensity"]),
+                         sh_cubemap(sh).astype(np.float32), float(line["ambient_intensity"]),
                          np.asarray(line["color_correction"], dtype=np.float64))
 
 

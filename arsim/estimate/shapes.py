@@ -131,12 +131,24 @@ def cubemap(anglemap: np.ndarray, size: int = CUBE_SIZE) -> np.ndarray:
     light = np.asarray(anglemap, dtype=np.float32)[..., :3]
     if light.shape[0] < SPLAT_SIDE:
         light = to_layout(light, "anglemap", SPLAT_SIDE)
-    d, radiance, omega = _disk(light)
-    face, row, col = cube_texels(d, size)
+    return cube_means(*_disk(light), size)[0].astype(np.float32)
+
+
+def cube_means(directions: np.ndarray, radiance: np.ndarray, omega: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """((6, size, size, 3) the solid-angle weighted mean radiance of the samples (directions (K, 3), radiance
+    (K, 3), solid angles (K,)) that fall in each cube texel, 0 where none does; (6, size, size) their solid
+    angle per texel)."""
+    face, row, col = cube_texels(directions, size)
     sums, weights = np.zeros((6, size, size, 3)), np.zeros((6, size, size))
     np.add.at(sums, (face, row, col), radiance * omega[:, None])
     np.add.at(weights, (face, row, col), omega)
-    return (sums / np.maximum(weights, 1e-300)[..., None]).astype(np.float32)
+    return sums / np.maximum(weights, 1e-300)[..., None], weights
+
+
+def sh_cubemap(sh_radiance: np.ndarray, size: int = CUBE_SIZE) -> np.ndarray:
+    """(6, size, size, 3) the radiance of SH coefficients (9, 3) at the texel centres, clamped at 0."""
+    return np.maximum(sh9(cube_directions(size).reshape(-1, 3)) @ np.asarray(sh_radiance, dtype=np.float64).reshape(9, 3),
+                      0.0).reshape(6, size, size, 3)
 
 
 def estimate_light(anglemap: np.ndarray) -> LightEstimate:

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from arsim.core.conventions import CameraIntrinsics
-from arsim.estimate.shapes import (CUBE_SIZE, LUMA, MAIN_LIGHT_SHARE, LightEstimate, cube_directions, cube_texels,
-                                   main_light_intensity)
+from arsim.estimate.shapes import (CUBE_SIZE, LUMA, MAIN_LIGHT_SHARE, LightEstimate, cube_means, main_light_intensity,
+                                   sh_cubemap)
 from arsim.lighting.bases.functions import sh9
 
 GRID = 8  # every GRID-th pixel of every GRID-th row
@@ -29,7 +29,6 @@ class SingleFrameEstimator:
         self.bearings = camera.unproject(np.stack([self.cols, self.rows], axis=-1).astype(np.float64))
         # each grid pixel's solid angle: the pixel's over the cosine-cubed of its angle from the axis, x GRID^2
         self.omega = GRID * GRID * self.bearings[:, 2] ** 3 / (camera.fx * camera.fy)
-        self.cube = cube_directions(CUBE_SIZE).reshape(-1, 3)
 
     def estimate(self, codes: np.ndarray, radiance_of_code: np.ndarray, camera_to_world: np.ndarray) -> LightEstimate:
         """One frame's estimate: codes (H, W, 3) uint8, radiance_of_code (256, 3) (the inverse response over
@@ -55,12 +54,8 @@ class SingleFrameEstimator:
         direction = (d[bright] * w[:, None]).sum(axis=0)
         direction /= max(np.linalg.norm(direction), 1e-300)
         intensity = main_light_intensity(radiance[bright], omega[bright], d[bright], direction)
-        faces = np.maximum(sh9(self.cube) @ sh, 0.0).reshape(6, CUBE_SIZE, CUBE_SIZE, 3)
-        f, r, k = cube_texels(d, CUBE_SIZE)
-        sums, weights = np.zeros((6, CUBE_SIZE, CUBE_SIZE, 3)), np.zeros((6, CUBE_SIZE, CUBE_SIZE))
-        np.add.at(sums, (f, r, k), radiance * omega[:, None])
-        np.add.at(weights, (f, r, k), omega)
-        faces = np.where(weights[..., None] > 0, sums / np.maximum(weights, 1e-300)[..., None], faces)
+        means, weights = cube_means(d, radiance, omega, CUBE_SIZE)
+        faces = np.where(weights[..., None] > 0, means, sh_cubemap(sh))
         green = mean[1] if mean[1] > 0 else 1.0
         return LightEstimate(sh, direction, intensity, faces.astype(np.float32), ambient,
                              np.array([mean[0] / green, 1.0, mean[2] / green, ambient]))
