@@ -240,9 +240,14 @@ def cmd_estimate(args: argparse.Namespace) -> int:
                 read_estimates(args.file, len(rec.frames))
             figures = estimated_sweep(rec, work, given, _bar).figures
     for name, f in figures.items():
+        diffuse = f["spheres"]["diffuse"]["rmse"] if "spheres" in f else None
+        sphere = "" if diffuse is None else f"; diffuse sphere RMSE {100 * diffuse:.1f} %"
+        if "final" not in f:  # (the truth's own estimate: scored by its spheres only)
+            print(f"{name:<8} own estimate{sphere}")
+            continue
         final = f["final"]
         print(f"{name:<8} at the end: SH error {100 * final['sh_error']:.2f} %, main light {final['main_light_error_deg']:.2f} "
-              f"degrees off, ambient x{final['ambient_ratio']:.3f}; converged at frame {f['converged_at_frame']}")
+              f"degrees off, ambient x{final['ambient_ratio']:.3f}; converged at frame {f['converged_at_frame']}{sphere}")
     print(f"wrote {args.output / 'estimates.jsonl'}, scores.json, scores.png")
     return 0
 

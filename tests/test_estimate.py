@@ -184,6 +184,9 @@ def test_arsim_estimate_scores_the_capture_and_a_file_and_refuses_a_bad_file(tmp
     assert abs(scores["file"]["final"]["sh_error"] - 1.0) < 1e-9 and scores["file"]["final"]["main_light_error_deg"] < 1e-6
     assert scores["capture"]["frames"] >= 1 and "capture" in lines[-1] and len(lines) == scores["file"]["frames"]
     assert set(scores["capture"]["spheres"]) == {"diffuse", "silver", "mirror"} and set(scores["file"]["spheres"]) == {"diffuse"}
+    # the truth's own estimate is scored by its spheres (what the shapes allow): closer than one frame's view
+    assert set(scores["truth"]) == {"spheres"}
+    assert scores["truth"]["spheres"]["diffuse"]["rmse"] < scores["single"]["spheres"]["diffuse"]["rmse"]
     assert (tmp_path / "est2" / "spheres.png").stat().st_size > 1000
     # the main light in the camera's frame: the world direction turned by the phone's camera orientation
     from arsim.capture.pipeline import fused_camera_orientations

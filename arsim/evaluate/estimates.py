@@ -78,15 +78,16 @@ def plot_scores(lines: list[dict], path) -> None:
 
 def sphere_figures(figures: dict, truth: np.ndarray, estimates: dict, given: dict | None, path) -> dict:
     """The scores with each estimator's three spheres at the end of the sweep against the truth's
-    (spheres.py): from its last estimate (LightEstimate: SH, main light and cubemap), and the file's diffuse
+    (spheres.py; the truth's own estimate among them: what the shapes allow): from its last estimate (LightEstimate: SH, main light and cubemap), and the file's diffuse
     sphere from its SH and main light (a file gives no cubemap); spheres.png shows them, a row each, on the truth's exposure."""
     from arsim.evaluate.spheres import estimate_spheres, sphere_scores, truth_spheres
 
     reference = truth_spheres(truth)
     rows = {"truth": reference}
     for name, e in estimates.items():
-        rows[name] = estimate_spheres(e.sh_radiance, e.main_light_direction, e.main_light_intensity, e.cubemap)
-        figures[name]["spheres"] = sphere_scores(rows[name], reference)
+        row = "truth's estimate" if name == "truth" else name  # (the row "truth" is the true light itself)
+        rows[row] = estimate_spheres(e.sh_radiance, e.main_light_direction, e.main_light_intensity, e.cubemap)
+        figures.setdefault(name, {})["spheres"] = sphere_scores(rows[row], reference)  # (the truth's: spheres only)
     if given is not None and "file" in figures:
         light = given["main_light"]
         mine = estimate_spheres(np.asarray(given["sh_radiance"]), light["direction_world"], light["intensity_rgb"], None)
@@ -128,7 +129,7 @@ def estimate_summary(figures: dict, ar_scores: dict) -> dict:
         row = {}
         if f is not None:
             spheres = f.get("spheres", {})
-            row = dict(f["final"], converged_at_frame=f["converged_at_frame"], stability=f["stability"],
+            row = dict(f.get("final", {}), converged_at_frame=f.get("converged_at_frame"), stability=f.get("stability"),
                        diffuse_sphere_rmse=spheres.get("diffuse", {}).get("rmse"),
                        mirror_sphere_hdr_flip=spheres.get("mirror", {}).get("hdr_flip"))
         if scored:

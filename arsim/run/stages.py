@@ -125,11 +125,13 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
         lines = estimate_lines(np.array([f["t_ns"] for f in rec.frames]), truth, result.snapshots, given, single, views)
         write_text_atomic(out / "estimates.jsonl", "".join(json_text(line, indent=None) for line in lines))
         figures = scores(lines)
-        final = {"capture": estimate_light(result.snapshots[-1][1])} if result.snapshots else {}
+        # the truth's own estimate: what a perfect estimator reports, the shapes' own limit
+        final = {"truth": estimate_light(truth)}
+        if result.snapshots:
+            final["capture"] = estimate_light(result.snapshots[-1][1])
         final["single"] = single[-1]
         figures = sphere_figures(figures, truth, final, lines[-1].get("file"), out / "spheres.png")
         (out / "platforms").mkdir(exist_ok=True)
-        final = {"truth": estimate_light(truth), **final}  # (what a perfect estimator reports: the shapes' own limit)
         for name, e in final.items():  # the sweep's last frame, per platform
             for platform, shape in PLATFORMS.items():
                 write_text_atomic(out / "platforms" / f"{name}_{platform}.json", json_text(shape(e)))
