@@ -83,10 +83,15 @@ def _equirect_sampler(equirect: np.ndarray) -> Callable[[np.ndarray], np.ndarray
     return sample
 
 
+def beyond_rim_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) (N, N): every texel's own index inside the disk, outside it its nearest texel inside."""
+    _, (ri, ci) = ndimage.distance_transform_edt(~anglemap_disk_mask(n), return_indices=True)
+    return ri, ci
+
+
 def extend_beyond_rim(anglemap: np.ndarray) -> np.ndarray:
     """The angle map (float64) with every texel outside the disk set to its nearest texel inside."""
-    outside = ~anglemap_disk_mask(anglemap.shape[0])
-    _, (ri, ci) = ndimage.distance_transform_edt(outside, return_indices=True)
+    ri, ci = beyond_rim_indices(anglemap.shape[0])
     return np.asarray(anglemap, dtype=np.float64)[ri, ci]
 
 

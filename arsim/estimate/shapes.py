@@ -19,13 +19,16 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+import scipy.sparse
 
-from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, normalize
-from arsim.core.resample import to_layout
+from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, anglemap_st_to_pixel,
+                                    direction_to_anglemap_st, normalize)
+from arsim.core.resample import beyond_rim_indices
 from arsim.lighting.bases.functions import sh9
 from arsim.sensors.camera import LUMA  # Rec. 709, linear
 
@@ -44,11 +47,18 @@ class LightEstimate:
     color_correction: np.ndarray  # (4,)
 
 
+@functools.lru_cache(maxsize=8)
+def _disk_geometry(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An N x N angle map's disk mask, its texels' directions (K, 3) and solid angles (K,), computed once a
+    size (an estimate a frame must not pay for them)."""
+    inside = anglemap_disk_mask(n)
+    return inside, anglemap_directions(n)[inside], anglemap_solid_angles(n)[inside]
+
+
 def _disk(anglemap: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The disk texels' directions (K, 3), radiance (K, 3) and solid angles (K,)."""
-    n = anglemap.shape[0]
-    inside = anglemap_disk_mask(n)
-    return anglemap_directions(n)[inside], np.asarray(anglemap, dtype=np.float64)[inside][:, :3], anglemap_solid_angles(n)[inside]
+    inside, d, omega = _disk_geometry(anglemap.shape[0])
+    return d, np.asarray(anglemap, dtype=np.float64)[inside][:, :3], omega
 
 
 def sh_radiance(anglemap: np.ndarray) -> np.ndarray:
@@ -60,17 +70,16 @@ def sh_radiance(anglemap: np.ndarray) -> np.ndarray:
 def main_light(anglemap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(direction (3,), intensity (3,)) of the brightest region (see the module's docstring)."""
     light = np.asarray(anglemap, dtype=np.float64)[..., :3]
-    n = light.shape[0]
-    inside = anglemap_disk_mask(n)
+    inside, directions, omega = _disk_geometry(light.shape[0])
     luminance = np.where(inside, light @ LUMA, 0.0)
     brightest = np.unravel_index(np.argmax(luminance), luminance.shape)
     bright = (luminance >= MAIN_LIGHT_SHARE * luminance[brightest]).astype(np.uint8)
     _, labels = cv2.connectedComponents(bright, connectivity=8)
-    region = labels == labels[brightest]
-    weights = (luminance * anglemap_solid_angles(n))[region]
-    d = anglemap_directions(n)[region]
+    region = (labels == labels[brightest])[inside]  # (over the disk's texels)
+    weights = luminance[inside][region] * omega[region]
+    d = directions[region]
     direction = normalize((d * weights[:, None]).sum(axis=0))
-    return direction, main_light_intensity(light[region], anglemap_solid_angles(n)[region], d, direction)
+    return direction, main_light_intensity(light[inside][region], omega[region], d, direction)
 
 
 def main_light_intensity(radiance: np.ndarray, omega: np.ndarray, directions: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -128,10 +137,38 @@ def cubemap(anglemap: np.ndarray, size: int = CUBE_SIZE) -> np.ndarray:
     texel's exact solid angle instead would make each texel as bright as the count of angle-map texels that
     happen to fall in it: +-10 % at 512², +-23 % at 64²). A light coarser than SPLAT_SIDE is resampled to
     it first (core.resample), so that every cube texel gets many."""
-    light = np.asarray(anglemap, dtype=np.float32)[..., :3]
-    if light.shape[0] < SPLAT_SIDE:
-        light = to_layout(light, "anglemap", SPLAT_SIDE)
-    return cube_means(*_disk(light), size)[0].astype(np.float32)
+    light = np.asarray(anglemap, dtype=np.float64)[..., :3]
+    n = light.shape[0]
+    return (_cube_operator(n, size) @ light.reshape(n * n, 3)).reshape(6, size, size, 3).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=8)
+def _cube_operator(n: int, size: int) -> scipy.sparse.csr_matrix:
+    """cubemap() as a sparse matrix (6 size², N²) over an N x N angle map's texels, built once a size: the
+    means are linear in the light, so a frame's estimate is one sparse product. A light coarser than
+    SPLAT_SIDE is read bilinearly at a SPLAT_SIDE angle map's texel centres (as core.resample.to_layout
+    resamples: edges clamp, texels beyond the rim take their nearest inside)."""
+    side = max(n, SPLAT_SIDE)
+    _, d, omega = _disk_geometry(side)
+    if side == n:  # the light's own texels
+        source, weight = np.flatnonzero(anglemap_disk_mask(n))[:, None], np.ones((len(d), 1))
+    else:
+        rows, cols = anglemap_st_to_pixel(direction_to_anglemap_st(d), n)
+        r0, c0 = np.floor(rows).astype(int), np.floor(cols).astype(int)
+        fr, fc = rows - r0, cols - c0
+        ri, ci = beyond_rim_indices(n)
+        source, weight = [], []
+        for dr, dc, w in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc), (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
+            r, c = np.clip(r0 + dr, 0, n - 1), np.clip(c0 + dc, 0, n - 1)
+            source.append(ri[r, c] * n + ci[r, c])
+            weight.append(w)
+        source, weight = np.stack(source, axis=1), np.stack(weight, axis=1)
+    face, row, col = cube_texels(d, size)
+    texel = (face * size + row) * size + col
+    per_texel = np.bincount(texel, weights=omega, minlength=6 * size * size)
+    values = weight * (omega / np.maximum(per_texel[texel], 1e-300))[:, None]
+    rows_ = np.repeat(texel, source.shape[1])
+    return scipy.sparse.csr_matrix((values.ravel(), (rows_, source.ravel())), shape=(6 * size * size, n * n))
 
 
 def cube_means(directions: np.ndarray, radiance: np.ndarray, omega: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -139,16 +176,22 @@ def cube_means(directions: np.ndarray, radiance: np.ndarray, omega: np.ndarray, 
     (K, 3), solid angles (K,)) that fall in each cube texel, 0 where none does; (6, size, size) their solid
     angle per texel)."""
     face, row, col = cube_texels(directions, size)
-    sums, weights = np.zeros((6, size, size, 3)), np.zeros((6, size, size))
-    np.add.at(sums, (face, row, col), radiance * omega[:, None])
-    np.add.at(weights, (face, row, col), omega)
-    return sums / np.maximum(weights, 1e-300)[..., None], weights
+    texel, count = (face * size + row) * size + col, 6 * size * size
+    weighted = radiance * omega[:, None]
+    sums = np.stack([np.bincount(texel, weights=weighted[:, c], minlength=count) for c in range(3)], axis=-1)
+    weights = np.bincount(texel, weights=omega, minlength=count)
+    return (sums / np.maximum(weights, 1e-300)[:, None]).reshape(6, size, size, 3), weights.reshape(6, size, size)
 
 
 def sh_cubemap(sh_radiance: np.ndarray, size: int = CUBE_SIZE) -> np.ndarray:
     """(6, size, size, 3) the radiance of SH coefficients (9, 3) at the texel centres, clamped at 0."""
-    return np.maximum(sh9(cube_directions(size).reshape(-1, 3)) @ np.asarray(sh_radiance, dtype=np.float64).reshape(9, 3),
-                      0.0).reshape(6, size, size, 3)
+    return np.maximum(_cube_sh9(size) @ np.asarray(sh_radiance, dtype=np.float64).reshape(9, 3), 0.0).reshape(6, size, size, 3)
+
+
+@functools.lru_cache(maxsize=4)
+def _cube_sh9(size: int) -> np.ndarray:
+    """(6 size², 9) the SH basis at the cube's texel centres, once a size."""
+    return sh9(cube_directions(size).reshape(-1, 3))
 
 
 def estimate_light(anglemap: np.ndarray) -> LightEstimate:
