@@ -150,7 +150,7 @@ def plot_probe_vs_truth(probe: np.ndarray, truth: np.ndarray, path: Path) -> Pat
     scale = 0.18 / max(float(np.median((truth @ LUMA)[inside])), 1e-12)  # the same exposure for both
 
     def shown(x):
-        return np.clip((x * scale) ** (1 / 2.2), 0, 1)
+        return np.clip(np.maximum(x * scale, 0.0) ** (1 / 2.2), 0, 1)  # (a probe may hold slightly negative texels)
 
     rel = np.where(inside, np.abs(probe @ LUMA - truth @ LUMA) / (truth @ LUMA + 1e-4 * (truth @ LUMA)[inside].mean()), np.nan)
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.8))

@@ -129,7 +129,7 @@ def estimate_summary(figures: dict, ar_scores: dict) -> dict:
         row = {}
         if f is not None:
             spheres = f.get("spheres", {})
-            row = dict(f.get("final", {}), converged_at_frame=f.get("converged_at_frame"), stability=f.get("stability"),
+            row = dict(f.get("final", {}), **{k: f[k] for k in ("converged_at_frame", "stability") if k in f},
                        diffuse_sphere_rmse=spheres.get("diffuse", {}).get("rmse"),
                        mirror_sphere_hdr_flip=spheres.get("mirror", {}).get("hdr_flip"))
         if scored:
