@@ -367,3 +367,57 @@ def test_command_line_writes_the_formats(tmp_path):
               "--image", "hdr")
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "out" / "sh.txt").is_file() and read_hdr(tmp_path / "out" / "equirect" / "radiance.hdr").shape == (32, 64, 3)
+
+
+def test_b10g11r11_texels_and_descriptor():
+    """The packed format: red in bits 0-10, green 11-21 (11-bit floats), blue 22-31 (10-bit), a half float's
+    exponent; the DFD's samples say so (unsigned floats)."""
+    from arsim.core.ktx2 import ktx2_bytes
+
+    cube = np.zeros((6, 2, 2, 3))
+    cube[0, 0, 0] = [1.0, 0.5, 2.0]
+    cube[0, 0, 1] = [-3.0, 1e9, 65024.0]
+    data = ktx2_bytes([cube], "b10g11r11")
+    f = parse_ktx2(data)
+    assert (f["vkFormat"], f["typeSize"], f["dfd"]["bytesPlane"][0]) == (122, 4, 4)
+    assert [(s["channel"], s["bitOffset"], s["bitLength"], s["qualifiers"], s["lower"]) for s in f["dfd"]["samples"]] == \
+        [(0, 0, 11, 0x80, 0), (1, 11, 11, 0x80, 0), (2, 22, 10, 0x80, 0)]
+    offset, length, _ = f["levels"][0]
+    words = np.frombuffer(data, "<u4", count=length // 4, offset=offset)
+    assert length == 6 * 4 * 4 and offset % 4 == 0
+
+    def unpack(word):  # exponent bias 15, as the Vulkan specification's unsigned 11- and 10-bit floats
+        values = []
+        for shift, mantissa_bits in ((0, 6), (11, 6), (22, 5)):
+            bits = (int(word) >> shift) & ((1 << (5 + mantissa_bits)) - 1)
+            e, m = bits >> mantissa_bits, bits & ((1 << mantissa_bits) - 1)
+            values.append(2.0 ** (e - 15) * (1 + m / 2**mantissa_bits) if e else 2.0**-14 * m / 2**mantissa_bits)
+        return values
+
+    assert unpack(words[0]) == [1.0, 0.5, 2.0]
+    assert unpack(words[1]) == [0.0, 65024.0, 64512.0]  # negatives 0; brighter than the largest finite: the largest
+    assert unpack(words[2]) == [0.0, 0.0, 0.0]
+
+
+def test_filament_sh_from_a_bake_without_its_probe(tmp_path):
+    """A bake whose probe cannot be found: sh.txt from its irradiance map (bands 0-2 of E / pi are A_l L_lm / pi)
+    equals sh.txt from the probe within 0.5 %; formats that need the radiance are refused in one line."""
+    inside = anglemap_disk_mask(32)
+    d = anglemap_directions(32)
+    probe = np.where(inside[..., None], (1.0 + 0.6 * d[..., 1:2] + 0.3 * d[..., 0:1] * d[..., 2:3] - 0.4 * d[..., 2:3])
+                     * np.array([1.0, 0.8, 0.6]), 0.0).astype(np.float32)
+    write_exr(tmp_path / "p.exr", probe)
+    export_maps(load_source(tmp_path / "p.exr"), ["filament"], tmp_path, size=16)
+    from_probe = read_sh_txt(tmp_path / "sh.txt")
+    bake = tmp_path / "maps"
+    bake.mkdir()
+    write_bake(bake, [1.0], "accurate", MapParameters(), BakeResult(accurate_maps(probe, [1.0]), 0.0, (0.0,)), "gone.exr")
+    out = tmp_path / "out"
+    out.mkdir()
+    source = load_source(bake)
+    assert source.radiance is None and "gone.exr" in source.missing
+    export_maps(source, ["filament"], out)
+    assert np.allclose(read_sh_txt(out / "sh.txt"), from_probe, rtol=0.005, atol=0.005 * from_probe[0].max())
+    assert json.loads((out / "sh.json").read_text())["from"] == "the bake's irradiance map"
+    r = arsim("export", bake, "-o", tmp_path / "o", "--format", "gltf")
+    assert_one_line_error(r, "--env")
