@@ -121,12 +121,17 @@ def load_source(path: Path, env: Path | None = None) -> ExportSource:
     return ExportSource(str(path), _probe(path))
 
 
+def check_face_size(size: int | None) -> None:
+    """ArsimError unless the cube faces' side asked for (None: the default) is a power of two, MIN_FACE to MAX_FACE."""
+    if size is not None and (size & (size - 1) or not MIN_FACE <= size <= MAX_FACE):
+        raise ArsimError(f"face size {size} is not allowed: give a power of two from {MIN_FACE} to {MAX_FACE}")
+
+
 def face_size(source: ExportSource, size: int | None) -> int:
     """The cube faces' side: as given, or the power of two nearest a quarter of the angle map's side (a
     face's central texel then spans about what the angle map's central texel does), MIN_FACE to MAX_FACE."""
+    check_face_size(size)
     if size is not None:
-        if size & (size - 1) or not MIN_FACE <= size <= MAX_FACE:
-            raise ArsimError(f"face size {size} is not allowed: give a power of two from {MIN_FACE} to {MAX_FACE}")
         return size
     n = source.radiance.shape[0] if source.radiance is not None else source.maps.size
     return int(np.clip(2 ** round(np.log2(n / 4)), MIN_FACE, MAX_FACE))
