@@ -421,3 +421,47 @@ def test_filament_sh_from_a_bake_without_its_probe(tmp_path):
     assert json.loads((out / "sh.json").read_text())["from"] == "the bake's irradiance map"
     r = arsim("export", bake, "-o", tmp_path / "o", "--format", "gltf")
     assert_one_line_error(r, "--env")
+
+
+def test_a_gl_sampler_reads_the_skybox_in_world_directions(tmp_path):
+    """The skybox file's faces uploaded as they are to an OpenGL cube map (moderngl) and sampled with world
+    directions give the probe's light from those directions: no axis is mirrored (red 2 + x, green 2 + y, blue
+    2 + z would show any flip as an error of up to 100 %)."""
+    from arsim.core.gl import create_gl_context
+    from arsim.core.resample import sample_anglemap
+
+    d = anglemap_directions(64)
+    probe = np.where(anglemap_disk_mask(64)[..., None], 2.0 + d, 0.0).astype(np.float32)
+    write_exr(tmp_path / "p.exr", probe)
+    out = tmp_path / "out"
+    out.mkdir()
+    export_maps(load_source(tmp_path / "p.exr"), ["ktx2"], out, size=32)
+    data = (out / "skybox.ktx2").read_bytes()
+    faces = ktx2_levels(parse_ktx2(data), data, 4)[0]
+    ctx = create_gl_context()
+    try:
+        texture = ctx.texture_cube((32, 32), 4, data=faces.astype("f4").tobytes(), dtype="f4")
+        texture.filter = (ctx.LINEAR, ctx.LINEAR)
+        rng = np.random.default_rng(3)
+        directions = rng.normal(size=(256, 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        source = ctx.buffer(np.concatenate([directions, np.zeros((256, 1))], axis=1).astype("f4").tobytes())
+        result = ctx.buffer(reserve=256 * 16)
+        shader = ctx.compute_shader("""
+            #version 430
+            layout(local_size_x = 64) in;
+            layout(std430, binding = 0) readonly buffer Directions { vec4 d[]; };
+            layout(std430, binding = 1) writeonly buffer Values { vec4 v[]; };
+            uniform samplerCube cube;
+            void main() { uint i = gl_GlobalInvocationID.x; v[i] = texture(cube, d[i].xyz); }
+        """)
+        texture.use(0)
+        shader["cube"] = 0
+        source.bind_to_storage_buffer(0)
+        result.bind_to_storage_buffer(1)
+        shader.run(256 // 64)
+        sampled = np.frombuffer(result.read(), dtype="f4").reshape(256, 4)[:, :3]
+    finally:
+        ctx.release()
+    assert np.allclose(sampled, 2.0 + directions, atol=0.04)
+    assert np.allclose(sampled, sample_anglemap(probe, directions), atol=0.04)
