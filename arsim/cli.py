@@ -380,11 +380,12 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 def _export_maps(args: argparse.Namespace) -> int:
     """MAPS (a bake folder) or PROBE (an HDR image) in the formats engines load (lighting/export.py)."""
-    from arsim.lighting.export import check_face_size, check_formats, export_maps, load_source
+    from arsim.lighting.export import check_face_size, check_formats, check_source, export_maps, load_source
 
     formats = check_formats(args.format)  # before any work or output
     check_face_size(args.size)
     source = load_source(args.input, args.env)
+    check_source(source, formats)
     with _output(args, args.input, args.env) as work:
         with progress_bar("exporting", len(formats)) as update:
             step = iter(range(len(formats)))

@@ -419,8 +419,9 @@ def test_filament_sh_from_a_bake_without_its_probe(tmp_path):
     export_maps(source, ["filament"], out)
     assert np.allclose(read_sh_txt(out / "sh.txt"), from_probe, rtol=0.005, atol=0.005 * from_probe[0].max())
     assert json.loads((out / "sh.json").read_text())["from"] == "the bake's irradiance map"
-    r = arsim("export", bake, "-o", tmp_path / "o", "--format", "gltf")
-    assert_one_line_error(r, "--env")
+    r = arsim("export", bake, "-o", tmp_path / "o", "--format", "filament,gltf")
+    assert_one_line_error(r, "gltf needs the radiance")
+    assert not (tmp_path / "o").exists()
 
 
 def test_a_gl_sampler_reads_the_skybox_in_world_directions(tmp_path):

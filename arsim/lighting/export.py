@@ -127,6 +127,21 @@ def check_face_size(size: int | None) -> None:
         raise ArsimError(f"face size {size} is not allowed: give a power of two from {MIN_FACE} to {MAX_FACE}")
 
 
+RADIANCE_FORMATS = ("ktx2", "gltf", "faces", "equirect")  # those that need the radiance, not only a bake's maps
+
+
+def check_source(source: ExportSource, formats: Sequence[str]) -> None:
+    """ArsimError, before any output, where a format needs what the source lacks: the radiance of a bake whose
+    probe is not found (all but filament), or for filament both the radiance and an irradiance map."""
+    needing = [f for f in formats if f in RADIANCE_FORMATS]
+    if source.radiance is None and needing:
+        verb = "needs" if len(needing) == 1 else "need"
+        raise ArsimError(f"{', '.join(needing)} {verb} the radiance, and {source.missing}; pass --env PROBE (the probe "
+                         "the maps were baked from)")
+    if "filament" in formats:
+        sh_origin(source)
+
+
 def face_size(source: ExportSource, size: int | None) -> int:
     """The cube faces' side: as given, or the power of two nearest a quarter of the angle map's side (a
     face's central texel then spans about what the angle map's central texel does), MIN_FACE to MAX_FACE."""
@@ -141,15 +156,24 @@ def face_size(source: ExportSource, size: int | None) -> int:
 # Spherical harmonics
 
 
+def sh_origin(source: ExportSource) -> str:
+    """Where the SH come from: the radiance, or a bake's irradiance map where its probe is not found; ArsimError
+    where neither is there."""
+    if source.radiance is not None:
+        return "the radiance"
+    if source.maps is not None and 1.0 in source.maps:
+        return "the bake's irradiance map"
+    raise ArsimError(f"{source.name}: has no irradiance map (exponent 1) and {source.missing}; pass --env PROBE")
+
+
 def sh_of(source: ExportSource) -> tuple[np.ndarray, str]:
     """(9, 3) the radiance's SH L_lm (lighting.bases.projection.sh_radiance's basis and order) and where they
-    came from: the radiance, or a bake's irradiance map where its probe is not found (the map is E / pi, whose
-    bands 0-2 are A_l L_lm / pi exactly, since a convolution with the cosine lobe acts band by band)."""
+    came from: the radiance, or a bake's irradiance map (E / pi, whose bands 0-2 are A_l L_lm / pi exactly,
+    since a convolution with the cosine lobe acts band by band)."""
+    origin = sh_origin(source)
     if source.radiance is not None:
-        return sh_radiance(source.radiance), "the radiance"
-    if source.maps is not None and 1.0 in source.maps:
-        return sh_radiance(source.maps[1.0]) * (np.pi / BAND_FACTORS)[:, None], "the bake's irradiance map"
-    raise ArsimError(f"{source.name}: has no irradiance map (exponent 1) and {source.missing}; pass --env PROBE")
+        return sh_radiance(source.radiance), origin
+    return sh_radiance(source.maps[1.0]) * (np.pi / BAND_FACTORS)[:, None], origin
 
 
 def filament_sh(sh: np.ndarray) -> np.ndarray:
@@ -210,9 +234,7 @@ class _Cache:
         self._cube = self._chain = self._lut = None
 
     def radiance(self, why: str) -> np.ndarray:
-        if self.source.radiance is None:
-            raise ArsimError(f"{why} needs the radiance, and {self.source.missing}; pass --env PROBE (the probe "
-                             "the maps were baked from)")
+        check_source(self.source, [why])
         return self.source.radiance
 
     def cube(self, why: str) -> np.ndarray:
@@ -293,6 +315,7 @@ def export_maps(source: ExportSource, formats: Sequence[str], out: Path, size: i
                 progress: Callable[[str], None] | None = None) -> ExportResult:
     """Write every format asked for into the folder `out` (README: Maps for engines); the seconds each took."""
     formats = check_formats(formats)
+    check_source(source, formats)
     if image_suffix not in IMAGE_SUFFIXES:
         raise ArsimError(f"image type {image_suffix!r} is unknown; use one of {', '.join(IMAGE_SUFFIXES)}")
     if texel not in ("rgba16f", "b10g11r11"):
