@@ -99,6 +99,8 @@ def _bake_environment(folder: Path) -> tuple[Path | None, str]:
     try:
         named = json.loads((folder / "bake.json").read_text(encoding="utf-8"))["environment"]
     except (KeyError, TypeError, ValueError):
+        named = None
+    if not isinstance(named, str) or not named or "\x00" in named:
         return None, f"{folder / 'bake.json'} names no environment"
     named_path = Path(named)
     candidates = [named_path, folder / named_path] + [parent / named_path for parent in folder.resolve().parents[:2]]
@@ -132,7 +134,7 @@ RADIANCE_FORMATS = ("ktx2", "gltf", "faces", "equirect")  # those that need the 
 
 def check_source(source: ExportSource, formats: Sequence[str]) -> None:
     """ArsimError, before any output, where a format needs what the source lacks: the radiance of a bake whose
-    probe is not found (all but filament), or for filament both the radiance and an irradiance map."""
+    probe is not found (all but filament), for filament the radiance or else an irradiance map."""
     needing = [f for f in formats if f in RADIANCE_FORMATS]
     if source.radiance is None and needing:
         verb = "needs" if len(needing) == 1 else "need"
