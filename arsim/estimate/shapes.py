@@ -4,13 +4,14 @@
   ordered (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1), (2,0), (2,1), (2,2), of the world direction
   (x, y, z) as three.js and WebXR write them (Y1-1 ~ y, Y10 ~ z, Y11 ~ x; bases.functions.sh9), so that
   the irradiance is E(n) = sum A_l L_lm Y_lm(n), A_l = pi, 2 pi / 3, pi / 4. By the sum over the angle
-  map's disk texels with their solid angles, in float64.
+  map's disk texels with their solid angles, in float64 (lighting.bases.projection.sh_radiance, which the
+  maps' export uses too).
 - `main_light`: the brightest region (the texels connected to the brightest one whose luminance is at
   least MAIN_LIGHT_SHARE of its) as a direction (its energy-weighted centroid, world axes) and an RGB
   intensity (its first moment along that direction, sum L w (d . l): the irradiance it gives a surface
   facing it where it is compact, less as it spreads: main_light_intensity).
 - `cubemap` (6, N, N, 3): radiance on the faces +X, -X, +Y, -Y, +Z, -Z in OpenGL's cube-map convention
-  (face texel (row r, column c) at s = (c + 0.5) / N, t = (r + 0.5) / N: cube_directions), each texel the
+  (face texel (row r, column c) at s = (c + 0.5) / N, t = (r + 0.5) / N: core.conventions.cube_directions), each texel the
   solid-angle weighted mean radiance of the light's texels in it (a box filter over the sphere).
 - `ambient_intensity`: the mean luminance (Rec. 709 weights) of the radiance over the sphere;
   `color_correction` (4): ARCore's ambient mode's shape, the mean radiance's RGB over its green, and the
@@ -24,8 +25,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, cube_directions,  # noqa: F401
-                                    cube_solid_angles, cube_texels, normalize)
+from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, normalize
+from arsim.core.conventions import cube_directions, cube_solid_angles, cube_texels  # noqa: F401  (the estimates' cube maps)
 from arsim.core.resample import to_layout
 from arsim.lighting.bases.functions import sh9
 from arsim.lighting.bases.projection import disk_samples as _disk
