@@ -466,3 +466,45 @@ def test_a_gl_sampler_reads_the_skybox_in_world_directions(tmp_path):
         ctx.release()
     assert np.allclose(sampled, 2.0 + directions, atol=0.04)
     assert np.allclose(sampled, sample_anglemap(probe, directions), atol=0.04)
+
+
+@pytest.fixture(scope="module")
+def fuzz_inputs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fuzz_inputs")
+    spot_probe([0, 0, 1], 16, folder / "p.exr")
+    cv2.imwrite(str(folder / "a.png"), np.zeros((8, 8, 3), np.uint8))
+    bake = folder / "maps"
+    bake.mkdir()
+    write_bake(bake, [1.0, 10.0], "fast", MapParameters(), BakeResult(np.stack([spot_probe([0, 0, 1], 16)] * 2), 0.0, (0.0,) * 2),
+               "nowhere.exr")
+    return {"probe": str(folder / "p.exr"), "png": str(folder / "a.png"), "maps": str(bake), "none": str(folder / "nosuch.exr"),
+            "folder": str(folder)}
+
+
+def test_fuzzed_export_command_lines_export_or_are_refused_in_one_line(fuzz_inputs, tmp_path_factory):
+    """Inputs (a probe, a bake without its probe, an 8-bit image, a missing file, a folder that is not a bake) and
+    options drawn at random: each command writes its output or is refused in one line, leaving nothing behind."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from tests.fuzzing import check_command
+
+    good = [fuzz_inputs["probe"], fuzz_inputs["maps"]] * 3  # drawn more often: some command lines must get through
+    paths = st.sampled_from(good + sorted(fuzz_inputs.values()) + ["", "a\x00b"])
+    options = {"--format": st.sampled_from(["ktx2", "filament", "gltf,faces", "equirect,filament", "faces", "filament,ktx2",
+                                            "ktx3", ",", "", "KTX2,ktx2"]),
+               "--size": st.sampled_from(["16", "32", "8", "100", "x", "0", "-16", "4096", ""]),
+               "--image": st.sampled_from(["exr", "hdr", "png", "jpg"]), "--texel": st.sampled_from(["rgba16f", "b10g11r11", "x"]),
+               "--env": paths}
+
+    seen = []
+
+    @settings(max_examples=60, deadline=None, derandomize=True, database=None)
+    @given(source=paths, names=st.lists(st.sampled_from(sorted(options)), unique=True, max_size=4), data=st.data())
+    def run(source, names, data):
+        argv = ["export", source, f"--format={data.draw(options['--format'])}"]
+        argv += [f"{name}={data.draw(options[name])}" for name in names if name != "--format"]
+        seen.append(check_command(argv, tmp_path_factory.mktemp("cmd") / "out"))
+
+    run()
+    assert seen.count("ok") >= 3 and seen.count("refused") >= 10, seen  # (both kinds were drawn)
