@@ -376,6 +376,33 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------------------------
+# arsim export
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    return _export_maps(args)
+
+
+def _export_maps(args: argparse.Namespace) -> int:
+    """MAPS (a bake folder) or PROBE (an HDR image) in the formats engines load (lighting/export.py)."""
+    from arsim.lighting.export import check_face_size, check_formats, check_source, export_maps, load_source
+
+    formats = check_formats(args.format)  # before any work or output
+    check_face_size(args.size)
+    source = load_source(args.input, args.env)
+    check_source(source, formats)
+    with _output(args, args.input, args.env) as work:
+        with progress_bar("exporting", len(formats)) as update:
+            step = iter(range(len(formats)))
+            result = export_maps(source, formats, work, args.size, f".{args.image}", args.texel,
+                                 progress=lambda name: update(completed=next(step), description=f"exporting {name}"))
+    for name, seconds in result.seconds.items():
+        print(f"{name:<9} {seconds:6.2f} s")
+    print(f"wrote {len(result.files)} files to {args.output}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
 # arsim bake, arsim compare-methods
 
 
@@ -732,6 +759,28 @@ def _bake_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=cmd_bake)
 
 
+def _export_parser(sub: argparse._SubParsersAction) -> None:
+    p = _command(sub, "export", "write maps for engines: a bake folder (MAPS) or a light probe (PROBE) as KTX2 cube maps "
+                 "(GGX chain, radiance, Phong maps, BRDF table), Filament's sh.txt, a glTF scene with "
+                 "EXT_lights_image_based, cube faces or equirects",
+                 "arsim export maps -o engine --format ktx2,filament,gltf   (or: arsim export assets/envmaps/city.exr -o city --format gltf)")
+    p.add_argument("input", type=_path, metavar="MAPS|PROBE",
+                   help="a folder written by `arsim bake`, or an HDR image (.exr or .hdr), angle map 1:1 or equirect 2:1")
+    _output_option(p, "output folder")
+    p.add_argument("--format", type=lambda t: [f for f in t.split(",") if f.strip()], required=True, metavar="F,F,...",
+                   help="one or more of: ktx2, filament, gltf, faces, equirect (README: Maps for engines)")
+    p.add_argument("--env", type=_path, metavar="PROBE",
+                   help="MAPS: the probe they were baked from (default: the one bake.json names, if found)")
+    p.add_argument("--size", type=_size, metavar="N",
+                   help="cube faces N x N, a power of two from 16 to 2048 (default: a quarter of the probe's side); "
+                        "equirects 2N high")
+    p.add_argument("--image", choices=("exr", "hdr", "png"), default="exr",
+                   help="faces' and equirects' files: exr (float32), hdr (RGBE) or png (tone-mapped preview); default exr")
+    p.add_argument("--texel", choices=("rgba16f", "b10g11r11"), default="rgba16f",
+                   help="the KTX2 cube maps' texels: half floats RGBA (default) or packed unsigned floats (half the size)")
+    p.set_defaults(run=cmd_export)
+
+
 def _bases_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "bases", "irradiance normal mapping's bases (SH, Half-Life 2, H-basis, modified H-basis, HSH, Makhotkin, "
                  "Zernike): `compare` measures how well each holds directional irradiance",
@@ -934,7 +983,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"arsim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for add in (_info_parser, _convert_parser, _bake_parser, _bases_parser, _prt_parser, _estimate_parser, _compare_methods_parser, _record_parser,
+    for add in (_info_parser, _convert_parser, _bake_parser, _export_parser, _bases_parser, _prt_parser, _estimate_parser, _compare_methods_parser, _record_parser,
                 _capture_parser, _render_parser, _profile_parser, _run_parser, _batch_parser, _diff_parser, _validate_parser):
         add(sub)
     return parser

@@ -31,6 +31,9 @@ __all__ = [
     "ANGLEMAP_RIM_ST",
     "CameraIntrinsics",
     "OPENCV_TO_OPENGL",
+    "CUBE_FACES",
+    "CUBE_FACE_NAMES",
+    "CUBE_FACE_SUFFIXES",
     "angle_between",
     "anglemap_directions",
     "anglemap_disk_mask",
@@ -38,6 +41,10 @@ __all__ = [
     "anglemap_solid_angles",
     "anglemap_st_to_pixel",
     "anglemap_texel_st",
+    "cube_directions",
+    "cube_face_st",
+    "cube_solid_angles",
+    "cube_texels",
     "direction_to_anglemap_st",
     "anglemap_st_to_direction",
     "direction_to_equirect_uv",
@@ -213,6 +220,63 @@ def equirect_solid_angles(height: int) -> np.ndarray:
 def yaw_rotation(degrees: float) -> Rotation:
     """Rotation about world +y (up) by the given angle, counter-clockwise seen from above."""
     return Rotation.from_rotvec([0.0, np.deg2rad(degrees), 0.0])
+
+
+# ---------------------------------------------------------------------------------------------------
+# Cube maps: OpenGL's and Vulkan's (and KTX2's) convention
+
+
+# OpenGL's cube-map faces in their order +X, -X, +Y, -Y, +Z, -Z: per face its major axis and the axes s and t
+# run along (GL spec, table 8.19); a face's row r, column c is at s = (c + 0.5) / N, t = (r + 0.5) / N, row 0 first
+CUBE_FACES = (((1, 0, 0), (0, 0, -1), (0, -1, 0)), ((-1, 0, 0), (0, 0, 1), (0, -1, 0)),
+              ((0, 1, 0), (1, 0, 0), (0, 0, 1)), ((0, -1, 0), (1, 0, 0), (0, 0, -1)),
+              ((0, 0, 1), (1, 0, 0), (0, -1, 0)), ((0, 0, -1), (-1, 0, 0), (0, -1, 0)))
+
+
+def cube_directions(size: int) -> np.ndarray:
+    """(6, size, size, 3) unit directions at the texel centres of the six faces: row r, column c at
+    s = (c + 0.5) / size, t = (r + 0.5) / size."""
+    st = (np.arange(size) + 0.5) / size * 2 - 1
+    t, s = np.meshgrid(st, st, indexing="ij")
+    faces = [np.asarray(major) + s[..., None] * np.asarray(sa) + t[..., None] * np.asarray(ta) for major, sa, ta in CUBE_FACES]
+    return normalize(np.stack(faces).astype(np.float64))
+
+
+def cube_solid_angles(size: int) -> np.ndarray:
+    """(size, size) the solid angle of a face's texels (the same on every face; they sum to 4 pi / 6)."""
+    edges = np.linspace(-1.0, 1.0, size + 1)
+
+    def corner(x, y):  # the solid angle of the face's part from its centre to (x, y)
+        return np.arctan2(x * y, np.sqrt(x * x + y * y + 1))
+
+    x0, y0 = np.meshgrid(edges[:-1], edges[:-1], indexing="ij")
+    x1, y1 = np.meshgrid(edges[1:], edges[1:], indexing="ij")
+    return corner(x1, y1) - corner(x0, y1) - corner(x1, y0) + corner(x0, y0)
+
+
+def cube_face_st(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(face, s, t) of unit directions (K, 3): the face each falls on (its major axis) and its coordinates
+    s, t in [-1, 1] on that face (CUBE_FACES)."""
+    d = np.asarray(directions, dtype=np.float64)
+    axis = np.argmax(np.abs(d), axis=1)
+    face = 2 * axis + (d[np.arange(len(d)), axis] < 0)
+    table = np.array(CUBE_FACES, dtype=np.float64)  # (6, 3 vectors, 3)
+    major = np.abs(d[np.arange(len(d)), axis])
+    s = np.einsum("kj,kj->k", d, table[face, 1]) / major
+    t = np.einsum("kj,kj->k", d, table[face, 2]) / major
+    return face, s, t
+
+
+def cube_texels(directions: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(face, row, col) of the cube texel each unit direction (K, 3) falls in."""
+    face, s, t = cube_face_st(directions)
+    col = np.clip(((s + 1) / 2 * size).astype(int), 0, size - 1)
+    row = np.clip(((t + 1) / 2 * size).astype(int), 0, size - 1)
+    return face, row, col
+
+
+CUBE_FACE_NAMES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
+CUBE_FACE_SUFFIXES = ("px", "nx", "py", "ny", "pz", "nz")  # file names of faces, as three.js and most tools write them
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -20,6 +20,7 @@ from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from arsim.core.conventions import (
+    CUBE_FACES,
     anglemap_disk_mask,
     anglemap_st_to_direction,
     anglemap_st_to_pixel,
@@ -29,6 +30,7 @@ from arsim.core.conventions import (
     equirect_texel_uv,
     equirect_uv_to_direction,
     equirect_uv_to_pixel,
+    normalize,
 )
 from arsim.core.errors import ArsimError
 
@@ -40,6 +42,7 @@ __all__ = [
     "sample_anglemap",
     "sample_equirect",
     "supersampling_factor",
+    "to_cube",
     "to_layout",
 ]
 
@@ -173,6 +176,33 @@ def to_layout(
     if layout == "anglemap":
         out[~anglemap_disk_mask(size)] = 0.0
     return out.astype(np.float32)
+
+
+def to_cube(image: np.ndarray, size: int, supersample: int | None = None) -> np.ndarray:
+    """(6, size, size, 3) float32: an equirect or angle-map image on the faces of a cube map in OpenGL's
+    convention (core.conventions.CUBE_FACES: +X, -X, +Y, -Y, +Z, -Z, each face's row 0 at t = -1): each texel
+    the mean of k x k bilinear samples inside it (k as supersampling_factor gives for the face's central texel,
+    the largest, against the source's)."""
+    source = detect_layout(image)
+    if size < 1:
+        raise ArsimError(f"cube face size {size} is too small; give a positive number of texels")
+    if supersample is None:
+        ratio = (2.0 / size) ** 2 / _largest_texel_solid_angle(source, image.shape[0])
+        supersample = int(np.clip(np.ceil(np.sqrt(ratio) - 1e-9), 1, MAX_SUPERSAMPLING))
+    sample = _equirect_sampler(image) if source == "equirect" else _anglemap_sampler(image)
+    k = supersample
+    offsets = (np.arange(k) + 0.5) / k - 0.5
+    centres = (np.arange(size) + 0.5) / size * 2.0 - 1.0
+    table = np.asarray(CUBE_FACES, dtype=np.float64)
+    out = np.zeros((6, size, size, image.shape[2]))
+    for dy in offsets:
+        for dx in offsets:
+            s = centres[None, :] + 2.0 * dx / size
+            t = centres[:, None] + 2.0 * dy / size
+            for face, (major, s_axis, t_axis) in enumerate(table):
+                d = major + s[..., None] * s_axis + t[..., None] * t_axis
+                out[face] += sample(normalize(np.broadcast_to(d, (size, size, 3)).reshape(-1, 3))).reshape(size, size, -1)
+    return (out / (k * k)).astype(np.float32)
 
 
 def equirect_to_anglemap(equirect: np.ndarray, size: int) -> np.ndarray:

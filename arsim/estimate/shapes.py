@@ -4,13 +4,14 @@
   ordered (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1), (2,0), (2,1), (2,2), of the world direction
   (x, y, z) as three.js and WebXR write them (Y1-1 ~ y, Y10 ~ z, Y11 ~ x; bases.functions.sh9), so that
   the irradiance is E(n) = sum A_l L_lm Y_lm(n), A_l = pi, 2 pi / 3, pi / 4. By the sum over the angle
-  map's disk texels with their solid angles, in float64.
+  map's disk texels with their solid angles, in float64 (lighting.bases.projection.sh_radiance, which the
+  maps' export uses too).
 - `main_light`: the brightest region (the texels connected to the brightest one whose luminance is at
   least MAIN_LIGHT_SHARE of its) as a direction (its energy-weighted centroid, world axes) and an RGB
   intensity (its first moment along that direction, sum L w (d . l): the irradiance it gives a surface
   facing it where it is compact, less as it spreads: main_light_intensity).
 - `cubemap` (6, N, N, 3): radiance on the faces +X, -X, +Y, -Y, +Z, -Z in OpenGL's cube-map convention
-  (face texel (row r, column c) at s = (c + 0.5) / N, t = (r + 0.5) / N: cube_directions), each texel the
+  (face texel (row r, column c) at s = (c + 0.5) / N, t = (r + 0.5) / N: core.conventions.cube_directions), each texel the
   solid-angle weighted mean radiance of the light's texels in it (a box filter over the sphere).
 - `ambient_intensity`: the mean luminance (Rec. 709 weights) of the radiance over the sphere;
   `color_correction` (4): ARCore's ambient mode's shape, the mean radiance's RGB over its green, and the
@@ -26,10 +27,13 @@ import cv2
 import numpy as np
 import scipy.sparse
 
-from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, anglemap_st_to_pixel,
-                                    direction_to_anglemap_st, normalize)
+from arsim.core.conventions import anglemap_disk_mask, anglemap_st_to_pixel, direction_to_anglemap_st, normalize
+from arsim.core.conventions import cube_directions, cube_solid_angles, cube_texels  # noqa: F401  (the estimates' cube maps)
 from arsim.core.resample import beyond_rim_indices
 from arsim.lighting.bases.functions import sh9
+from arsim.lighting.bases.projection import disk_geometry as _disk_geometry
+from arsim.lighting.bases.projection import disk_samples as _disk
+from arsim.lighting.bases.projection import sh_radiance  # noqa: F401  (one rule, in lighting; estimates use it here)
 from arsim.sensors.camera import LUMA  # Rec. 709, linear
 
 MAIN_LIGHT_SHARE = 0.5  # the main light: texels at least this share of the brightest one's luminance
@@ -45,26 +49,6 @@ class LightEstimate:
     cubemap: np.ndarray  # (6, N, N, 3)
     ambient_intensity: float
     color_correction: np.ndarray  # (4,)
-
-
-@functools.lru_cache(maxsize=8)
-def _disk_geometry(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """An N x N angle map's disk mask, its texels' directions (K, 3) and solid angles (K,), computed once a
-    size (an estimate a frame must not pay for them)."""
-    inside = anglemap_disk_mask(n)
-    return inside, anglemap_directions(n)[inside], anglemap_solid_angles(n)[inside]
-
-
-def _disk(anglemap: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The disk texels' directions (K, 3), radiance (K, 3) and solid angles (K,)."""
-    inside, d, omega = _disk_geometry(anglemap.shape[0])
-    return d, np.asarray(anglemap, dtype=np.float64)[inside][:, :3], omega
-
-
-def sh_radiance(anglemap: np.ndarray) -> np.ndarray:
-    """(9, 3): the radiance's SH of bands 0-2 (see the module's docstring)."""
-    d, radiance, omega = _disk(anglemap)
-    return sh9(d).T @ (radiance * omega[:, None])
 
 
 def main_light(anglemap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -87,47 +71,6 @@ def main_light_intensity(radiance: np.ndarray, omega: np.ndarray, directions: np
     facing it where it is compact (a sun), falling to 0 as it spreads around the sphere (a uniform light
     has no direction to give), so that it can stand as a directional light (estimate.lit)."""
     return (radiance * (omega * (directions @ direction))[:, None]).sum(axis=0)
-
-
-# OpenGL's cube-map faces: per face its major axis and the axes s and t run along (GL spec, table 8.19)
-_FACES = (((1, 0, 0), (0, 0, -1), (0, -1, 0)), ((-1, 0, 0), (0, 0, 1), (0, -1, 0)),
-          ((0, 1, 0), (1, 0, 0), (0, 0, 1)), ((0, -1, 0), (1, 0, 0), (0, 0, -1)),
-          ((0, 0, 1), (1, 0, 0), (0, -1, 0)), ((0, 0, -1), (-1, 0, 0), (0, -1, 0)))
-
-
-def cube_directions(size: int) -> np.ndarray:
-    """(6, size, size, 3) unit directions at the texel centres of the six faces: row r, column c at
-    s = (c + 0.5) / size, t = (r + 0.5) / size."""
-    st = (np.arange(size) + 0.5) / size * 2 - 1
-    t, s = np.meshgrid(st, st, indexing="ij")
-    faces = [np.asarray(major) + s[..., None] * np.asarray(sa) + t[..., None] * np.asarray(ta) for major, sa, ta in _FACES]
-    return normalize(np.stack(faces).astype(np.float64))
-
-
-def cube_solid_angles(size: int) -> np.ndarray:
-    """(size, size) the solid angle of a face's texels (the same on every face; they sum to 4 pi / 6)."""
-    edges = np.linspace(-1.0, 1.0, size + 1)
-
-    def corner(x, y):  # the solid angle of the face's part from its centre to (x, y)
-        return np.arctan2(x * y, np.sqrt(x * x + y * y + 1))
-
-    x0, y0 = np.meshgrid(edges[:-1], edges[:-1], indexing="ij")
-    x1, y1 = np.meshgrid(edges[1:], edges[1:], indexing="ij")
-    return corner(x1, y1) - corner(x0, y1) - corner(x1, y0) + corner(x0, y0)
-
-
-def cube_texels(directions: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(face, row, col) of the cube texel each unit direction (K, 3) falls in."""
-    d = np.asarray(directions, dtype=np.float64)
-    axis = np.argmax(np.abs(d), axis=1)
-    face = 2 * axis + (d[np.arange(len(d)), axis] < 0)
-    table = np.array(_FACES, dtype=np.float64)  # (6, 3 vectors, 3)
-    major = np.abs(d[np.arange(len(d)), axis])
-    s = np.einsum("kj,kj->k", d, table[face, 1]) / major
-    t = np.einsum("kj,kj->k", d, table[face, 2]) / major
-    col = np.clip(((s + 1) / 2 * size).astype(int), 0, size - 1)
-    row = np.clip(((t + 1) / 2 * size).astype(int), 0, size - 1)
-    return face, row, col
 
 
 def cubemap(anglemap: np.ndarray, size: int = CUBE_SIZE) -> np.ndarray:

@@ -8,6 +8,8 @@ mc.py        Monte Carlo importance sampling with filtered samples
 phong.py     the Phong lobe's zonal SH coefficients (eq. 2.33)
 methods.py   the methods by name (METHODS), their parameters, and a timed bake
 mapset.py    MapSet: one method's maps of one light
+ggx.py       GGX prefiltered cube maps and the split sum's BRDF table
+export.py    maps for engines (KTX2, Filament's SH, glTF with gltf_ibl.py, faces, equirects)
 """
 
 from arsim.core.public import lazy_names

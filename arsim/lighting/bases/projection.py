@@ -8,13 +8,40 @@ orthogonal over the hemisphere) G^-1 makes it the best fit all the same.
 
 from __future__ import annotations
 
-from functools import cache
+from functools import cache, lru_cache
 from math import log, pi, sqrt
 
 import numpy as np
 
+from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.lighting.bases.functions import Basis, get_basis, sh9
 from arsim.lighting.bases.quadrature import hemisphere_quadrature
+
+
+@lru_cache(maxsize=4)
+def disk_geometry(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An N x N angle map's disk mask, its texels' directions (K, 3) and solid angles (K,), computed once a
+    size (a light estimate a frame must not pay for them; read-only)."""
+    inside = anglemap_disk_mask(n)
+    arrays = inside, anglemap_directions(n)[inside], anglemap_solid_angles(n)[inside]
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays
+
+
+def disk_samples(anglemap: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An angle map's disk texels as samples of the sphere: directions (K, 3), radiance (K, 3), solid angles (K,)."""
+    inside, d, omega = disk_geometry(anglemap.shape[0])
+    return d, np.asarray(anglemap, dtype=np.float64)[inside][:, :3], omega
+
+
+def sh_radiance(anglemap: np.ndarray) -> np.ndarray:
+    """(9, 3): the radiance's coefficients L_lm in the real orthonormal SH basis of bands 0-2 (sh9: no
+    Condon-Shortley phase, order (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1), (2,0), (2,1), (2,2), of the world
+    direction (x, y, z), +y up), so that the irradiance is E(n) = sum A_l L_lm Y_lm(n), A_l = pi, 2 pi / 3, pi / 4:
+    the sum over the angle map's disk texels with their solid angles, in float64."""
+    d, radiance, omega = disk_samples(anglemap)
+    return sh9(d).T @ (radiance * omega[:, None])
 
 
 @cache
