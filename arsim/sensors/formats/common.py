@@ -42,6 +42,18 @@ class Photometric:
                              "pixels with values in (0, 1]")
 
 
+def exact_rotations(q: np.ndarray, where: str) -> Rotation:
+    """Quaternions (K, 4; x, y, z, w) as rotations, each kept as written where it is unit to 1e-8 (as a file's
+    9 decimals are: normalising them again moves their last bits, and a second export would differ), normalised
+    where it is further off; a zero quaternion refused."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    norms = np.linalg.norm(q, axis=1)
+    if (norms < 1e-6).any():
+        raise ArsimError(f"{where}: entry {int(np.flatnonzero(norms < 1e-6)[0]) + 1} is a zero quaternion")
+    off = np.abs(norms - 1.0) > 1e-8
+    return Rotation(np.where(off[:, None], q / norms[:, None], q), normalize=False)
+
+
 def merged_imu(imu: dict[str, SensorStream]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The gyroscope and accelerometer at common timestamps, as EuRoC's imu0 and a ROS Imu message hold them:
     the gyroscope's own samples and times, the accelerometer interpolated linearly to them (held at its first

@@ -29,7 +29,8 @@ from scipy.spatial.transform import Rotation
 
 from arsim.core.errors import ArsimError
 from arsim.core.files import write_bytes_atomic, write_text_atomic
-from arsim.sensors.formats.common import (FOREIGN_EXPOSURE_NS, FOREIGN_ISO, Photometric, extras_meta, fused_orientation,
+from arsim.sensors.formats.common import (FOREIGN_EXPOSURE_NS, FOREIGN_ISO, Photometric, exact_rotations, extras_meta,
+                                          fused_orientation,
                                           imu_streams, layout_meta, merged_imu, recording_of)
 from arsim.sensors.imu import SensorStream
 from arsim.sensors.recording import (SENSORS, Recording, _camera_problem, _check_frame_header, _csv_formatted,
@@ -299,7 +300,7 @@ def read_extras(root: Path) -> tuple[dict | None, dict, dict | None, tuple | Non
     folder = root / EXTRAS
     if not (folder / "meta.json").is_file():
         return None, {}, None, None, []
-    from arsim.sensors.recording import _increasing, _numbers, _read_csv, _rotations
+    from arsim.sensors.recording import _increasing, _numbers, _read_csv
 
     try:
         meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
@@ -324,7 +325,9 @@ def read_extras(root: Path) -> tuple[dict | None, dict, dict | None, tuple | Non
     path = folder / "orientation.csv"
     v = _numbers(path, _read_csv(path, ["t_ns", "qx", "qy", "qz", "qw"]), slice(0, 5))
     _increasing(path, v[:, 0].astype(np.int64), "orientations")
-    orientation = (v[:, 0].astype(np.int64), _rotations(path, v[:, 1:], "orientations"))
+    if len(v) < 2:
+        raise ArsimError(f"{path}: holds {len(v)} orientations, need at least 2")
+    orientation = (v[:, 0].astype(np.int64), exact_rotations(v[:, 1:], str(path)))
     path = folder / "burst.csv"
     rows = _read_csv(path, ["exposure_ns", "iso", "file"])
     burst = []
@@ -345,7 +348,7 @@ def read_groundtruth(path: Path) -> tuple | None:
     norms = np.linalg.norm(v[:, 3:7], axis=1)
     if (norms < 1e-6).any():
         raise ArsimError(f"{path}: line {rows[int(np.flatnonzero(norms < 1e-6)[0])][0]} has a zero quaternion")
-    return t, v[:, :3], Rotation.from_quat(np.column_stack([v[:, 4:7], v[:, 3]]))  # w, x, y, z -> x, y, z, w
+    return t, v[:, :3], exact_rotations(np.column_stack([v[:, 4:7], v[:, 3]]), str(path))  # w, x, y, z -> x, y, z, w
 
 
 def read_euroc(root: Path, exposures_from=None, photometric: Photometric | None = None,

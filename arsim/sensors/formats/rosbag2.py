@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 from arsim.core.errors import ArsimError
 from arsim.core.files import write_bytes_atomic
 from arsim.core.png import png_bytes, read_frame
-from arsim.sensors.formats.common import (FOREIGN_EXPOSURE_NS, FOREIGN_ISO, fused_orientation, imu_streams, layout_meta,
+from arsim.sensors.formats.common import (FOREIGN_EXPOSURE_NS, FOREIGN_ISO, exact_rotations, fused_orientation, imu_streams, layout_meta,
                                           merged_imu, recording_of)
 from arsim.sensors.imu import SensorStream
 from arsim.sensors.recording import _camera_problem, _rotation_problem, Recording
@@ -43,6 +43,7 @@ IMU, MAG, TF, TRUTH = "/imu0", "/imu0/mag", "/tf_static", "/groundtruth/pose"
 META, ACCEL, ORIENTATION = "/arsim/meta", "/arsim/accelerometer", "/arsim/orientation"
 BURST, BURST_EXPOSURE = "/arsim/burst/image_raw", "/arsim/burst/exposure"
 BODY, CAMERA, WORLD = "imu0", "cam0", "world"
+BAG_NAME = "recording"  # the storage file's name: recording.mcap
 TESLA_PER_MICROTESLA = 1e-6
 
 
@@ -100,12 +101,25 @@ class _Messages:
 
 
 def write_bag(rec: Recording, out: Path) -> None:
-    """rec as a ROS 2 bag in the folder out (which must not exist yet, or be empty: rosbags makes it)."""
+    """rec as a ROS 2 bag in the folder out (made if missing): metadata.yaml and recording.mcap."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    # rosbags names the storage file after the bag's folder: made as out/.bag/recording, its files moved up,
+    # so that the file's name is the same whatever out is called (and an export is the same bytes)
+    scratch = out / ".bag"
+    shutil.rmtree(scratch, ignore_errors=True)
+    scratch.mkdir()
+    try:
+        _write_bag(rec, scratch / BAG_NAME)
+        for f in sorted((scratch / BAG_NAME).iterdir()):
+            f.replace(out / f.name)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _write_bag(rec: Recording, out: Path) -> None:
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    out = Path(out)
-    if out.is_dir() and not any(out.iterdir()):
-        out.rmdir()
     m = _Messages()
     writer = Writer(out, version=8, storage_plugin=StoragePlugin.MCAP)
     writer.open()
@@ -335,9 +349,8 @@ def _recording(reader, by_topic: dict, path: Path, folder: Path, camera: dict, e
     if truth_topic is not None and len(by_topic[truth_topic]) >= 2:
         msgs = by_topic[truth_topic]
         q = np.array([[m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w] for m in msgs])
-        if (np.linalg.norm(q, axis=1) < 1e-6).any():
-            raise ArsimError(f"{path}: {truth_topic}: a pose has a zero quaternion")
-        groundtruth = (_series(path, truth_topic, msgs), np.array([_xyz(m.pose.position) for m in msgs]), Rotation.from_quat(q))
+        groundtruth = (_series(path, truth_topic, msgs), np.array([_xyz(m.pose.position) for m in msgs]),
+                       exact_rotations(q, f"{path}: {truth_topic}"))
     if extras is not None:  # (in the extras' order, so that a second export writes the same JSON)
         meta = extras | {"camera": camera, "camera_to_device": camera_to_device, "source_format": "rosbag2"}
     else:
@@ -345,7 +358,8 @@ def _recording(reader, by_topic: dict, path: Path, folder: Path, camera: dict, e
     if by_topic.get(ORIENTATION):
         msgs = by_topic[ORIENTATION]
         orientation = (_series(path, ORIENTATION, msgs),
-                       Rotation.from_quat([[m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w] for m in msgs]))
+                       exact_rotations([[m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w] for m in msgs],
+                                       f"{path}: {ORIENTATION}"))
     else:
         orientation = fused_orientation(imu, groundtruth, meta["fusion"], f"{path}: {imu_topic}")
     return recording_of(folder, meta, frames, burst, imu, orientation, groundtruth, None)
