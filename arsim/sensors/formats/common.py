@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from arsim.core.errors import ArsimError
 from arsim.sensors.fusion import mahony
 from arsim.sensors.imu import SensorStream
-from arsim.sensors.recording import FORMAT, SENSORS, Recording
+from arsim.sensors.recording import FORMAT, Recording
 
 # meta.json's keys a layout holds in its own files (the camera's sensor.yaml or CameraInfo); the arsim extras
 # keep the rest. source_format is the reader's note of where a recording came from (never written).
@@ -121,7 +121,3 @@ def layout_meta(camera: dict, camera_to_device: list, extras: dict | None, frame
 
 def extras_meta(meta: dict) -> dict:
     return {k: v for k, v in meta.items() if k not in LAYOUT_KEYS}
-
-
-def sensors_present(imu: dict) -> list[str]:
-    return [name for name in SENSORS if len(imu[name].t_ns)]

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from scipy.spatial.transform import Rotation
 
 from arsim.core.errors import ArsimError
 from arsim.core.files import write_bytes_atomic, write_text_atomic

@@ -23,7 +23,7 @@ from arsim.core.files import atomic_path, write_text_atomic
 from arsim.core.hdr_io import read_hdr, write_exr
 from arsim.core.png import png_problem
 from arsim.sensors.formats.common import Photometric
-from arsim.sensors.formats.euroc import EXTRAS, MAV, read_euroc, write_euroc, yaml_float
+from arsim.sensors.formats.euroc import EXTRAS, read_euroc, write_euroc, yaml_float
 from arsim.sensors.recording import Recording
 
 DSO = "dso/cam0"
