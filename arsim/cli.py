@@ -233,9 +233,9 @@ def _export_recording(args: argparse.Namespace) -> int:
     from arsim.run.stages import exported_recording
     from arsim.sensors.formats import open_recording
 
-    open_recording(args.source)  # a recording that cannot be read fails here, before any output
+    rec = open_recording(args.source)  # a recording that cannot be read fails here, before any output
     with _output(args, args.source) as work:
-        written = exported_recording(args.source, args.format, work, _bar)
+        written = exported_recording(rec, args.source, args.format, work, _bar)
     out = args.output
     ar = f", the AR path's {len(written[1][0].frames)} in {out / 'ar'}" if len(written) > 1 else ""
     calibrated = args.format == "tumvi" and (out / "dso" / "cam0" / "pcalib.txt").is_file()

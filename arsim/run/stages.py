@@ -273,14 +273,14 @@ def tumvi_photometric(rec: Recording):
                        vignette(camera.height, camera.width, sensor.vignetting).astype(np.float32))
 
 
-def exported_recording(source: Path, kind: str, out: Path, stage: Stage = quiet_stage) -> list:
-    """A recording (any layout) and its AR path written in EuRoC's, TUM-VI's or a ROS 2 bag's layout into out
+def exported_recording(rec: Recording, source: Path, kind: str, out: Path, stage: Stage = quiet_stage) -> list:
+    """A recording (any layout, read from source) and its AR path written in EuRoC's, TUM-VI's or a ROS 2 bag's layout into out
     (the AR path into out/ar); TUM-VI's photometric calibration from the burst where the recording has none.
     Returns [(recording, folder)] as written."""
     from arsim.sensors.formats import export_recording
 
     with stage(f"writing the recording as {kind}"):
-        return export_recording(source, kind, out, tumvi_photometric)
+        return export_recording(rec, source, kind, out, tumvi_photometric)
 
 
 def profile_session(scenario: Scenario, out: Path, bakes: Sequence[BakeSettings], budget_ms: float, max_frames: int,

@@ -80,13 +80,12 @@ def write_recording(rec: Recording, kind: str, out: Path, photometric: Photometr
         raise ArsimError(f"format {kind!r} is not known; give one of {', '.join(FORMATS)}")
 
 
-def export_recording(source: Path, kind: str, out: Path,
+def export_recording(rec: Recording, source: Path, kind: str, out: Path,
                      photometric: Callable[[Recording], Photometric | None] = lambda rec: None) -> list[tuple[Recording, Path]]:
-    """The recording at source (any layout) and its AR path written in `kind` into out and out/ar; photometric
+    """A recording (open_recording(source)) and its AR path written in `kind` into out and out/ar; photometric
     gives a recording's calibration where TUM-VI needs one. Returns what was written where."""
-    rec = open_recording(source)
-    written = []
     ar = ar_source(source, rec)
+    written = []
     for r, where in ((rec, Path(out)), *(((open_recording(ar), Path(out) / "ar"),) if ar is not None else ())):
         write_recording(r, kind, where, photometric(r) if kind == "tumvi" and r.photometric is None else None)
         written.append((r, where))

@@ -235,14 +235,17 @@ def _topic(reader, msgtype: str, preferred: str, exclude: str = "/arsim/") -> st
 
 
 def _read(reader, path: Path) -> Recording:
+    """Two passes: the small messages first (the camera, the IMU, the extras), then the images one at a time into
+    PNG files (a minute's frames decoded at once would be gigabytes)."""
     ts = _typestore()
-    by_topic: dict[str, list] = {}
-    for connection, _, raw in reader.messages():
-        if connection.msgtype in ts.types:
-            by_topic.setdefault(connection.topic, []).append(ts.deserialize_cdr(raw, connection.msgtype))
     image_topic = _topic(reader, "sensor_msgs/msg/Image", IMAGE)
     if image_topic is None:
         raise ArsimError(f"{path}: the bag has no image topic (sensor_msgs/msg/Image); record the camera too")
+    images_at = {image_topic, BURST}
+    by_topic: dict[str, list] = {}
+    small = [c for c in reader.connections if c.topic not in images_at and c.msgtype in ts.types]
+    for connection, _, raw in reader.messages(connections=small):
+        by_topic.setdefault(connection.topic, []).append(ts.deserialize_cdr(raw, connection.msgtype))
     meta_msgs = by_topic.get(META, [])
     extras = json.loads(meta_msgs[0].data) if meta_msgs else None
     if extras is not None and not isinstance(extras, dict):
@@ -251,7 +254,7 @@ def _read(reader, path: Path) -> Recording:
     info_topic = _topic(reader, "sensor_msgs/msg/CameraInfo", f"{ns}/camera_info")
     if extras is not None and isinstance(extras.get("camera"), dict):
         camera = dict(extras["camera"])
-    elif info_topic is not None:
+    elif info_topic is not None and by_topic.get(info_topic):
         info = by_topic[info_topic][0]
         camera = {"width": int(info.width), "height": int(info.height), "fx": float(info.k[0]), "fy": float(info.k[4]),
                   "cx": float(info.k[2]), "cy": float(info.k[5]), "k1": float(info.d[0]) if len(info.d) else 0.0,
@@ -259,40 +262,40 @@ def _read(reader, path: Path) -> Recording:
     else:
         raise ArsimError(f"{path}: the bag has no camera intrinsics (no sensor_msgs/msg/CameraInfo topic beside "
                          f"{image_topic}); add the camera's CameraInfo")
-    images = by_topic[image_topic]
-    times = [_stamp(msg) for msg in images]
-    for k in range(1, len(times)):
-        if times[k] <= times[k - 1]:
-            raise ArsimError(f"{path}: {image_topic}: message {k + 1}'s stamp {times[k]} ns is not after the previous "
-                             f"one's {times[k - 1]} ns; the frames must be in increasing time order")
-    if camera.get("fps") is None:
-        dt = np.median(np.diff(times)) if len(times) > 1 else 0
-        camera["fps"] = 1e9 / dt if dt > 0 else 30.0
-    if problem := _camera_problem(camera):
+    if problem := _camera_problem({**camera, "fps": camera.get("fps") or 1.0}):
         raise ArsimError(f"{path}: the camera's {problem}")
     exposures = {_stamp(msg): e for msg in by_topic.get(f"{ns}/exposure", []) if (e := _exposure(msg)) is not None}
+    burst_exposures = [_exposure(msg) for msg in by_topic.get(BURST_EXPOSURE, [])]
 
     folder = Path(tempfile.mkdtemp(prefix="arsim-bag-"))
     try:
         (folder / "frames").mkdir()
-        frames = []
-        for k, (msg, t) in enumerate(zip(images, times)):
-            rgb = _rgb(msg, f"{path}: {image_topic}")
+        frames, burst = [], []
+        for connection, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in images_at]):
+            msg = ts.deserialize_cdr(raw, connection.msgtype)
+            rgb = _rgb(msg, f"{path}: {connection.topic}")
             if rgb.shape[:2] != (camera["height"], camera["width"]):
-                raise ArsimError(f"{path}: {image_topic}: message {k + 1} is {rgb.shape[1]} x {rgb.shape[0]}, the "
+                raise ArsimError(f"{path}: {connection.topic}: an image is {rgb.shape[1]} x {rgb.shape[0]}, the "
                                  f"camera's are {camera['width']} x {camera['height']}")
-            name = f"frames/{k:06d}.png"
+            if connection.topic == BURST:
+                if len(burst) >= len(burst_exposures) or burst_exposures[len(burst)] is None:
+                    raise ArsimError(f"{path}: {BURST} has more images than {BURST_EXPOSURE} has exposures")
+                (folder / "burst").mkdir(exist_ok=True)
+                name = f"burst/{len(burst):02d}.png"
+                exposure_ns, iso = burst_exposures[len(burst)]
+                burst.append({"exposure_ns": exposure_ns, "iso": iso, "file": name})
+            else:
+                t = _stamp(msg)
+                if frames and t <= frames[-1]["t_ns"]:
+                    raise ArsimError(f"{path}: {image_topic}: message {len(frames) + 1}'s stamp {t} ns is not after the "
+                                     f"previous one's {frames[-1]['t_ns']} ns; the frames must be in increasing time order")
+                name = f"frames/{len(frames):06d}.png"
+                exposure_ns, iso = exposures.get(t, (FOREIGN_EXPOSURE_NS, FOREIGN_ISO))
+                frames.append({"t_ns": t, "exposure_ns": exposure_ns, "iso": iso, "file": name})
             write_bytes_atomic(folder / name, png_bytes(rgb))
-            exposure_ns, iso = exposures.get(t, (FOREIGN_EXPOSURE_NS, FOREIGN_ISO))
-            frames.append({"t_ns": t, "exposure_ns": exposure_ns, "iso": iso, "file": name})
-        burst = []
-        burst_exposures = [_exposure(msg) for msg in by_topic.get(BURST_EXPOSURE, [])]
-        if by_topic.get(BURST):
-            (folder / "burst").mkdir()
-        for k, (msg, e) in enumerate(zip(by_topic.get(BURST, []), burst_exposures)):
-            name = f"burst/{k:02d}.png"
-            write_bytes_atomic(folder / name, png_bytes(_rgb(msg, f"{path}: {BURST}")))
-            burst.append({"exposure_ns": e[0], "iso": e[1], "file": name})
+        if camera.get("fps") is None:
+            dt = np.median(np.diff([f["t_ns"] for f in frames])) if len(frames) > 1 else 0
+            camera["fps"] = 1e9 / dt if dt > 0 else 30.0
         rec = _recording(reader, by_topic, path, folder, camera, extras, frames, burst)
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
