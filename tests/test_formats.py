@@ -148,6 +148,37 @@ def test_a_euroc_folder_from_elsewhere_is_read_without_the_extras(exported, tmp_
     assert r.returncode == 0 and "euroc layout" in r.stdout, r.stderr
 
 
+def test_a_tumvi_folder_from_elsewhere_gives_its_exposures_and_calibration(exported, tmp_path):
+    """Without arsim/: the exposure times from dso/cam0/times.txt, the vignette from its 16-bit PNG (within half a
+    step of 1/65535 of the exact one), the inverse response from pcalib.txt."""
+    folder = tmp_path / "plain"
+    shutil.copytree(exported["tumvi"], folder)
+    exact = load_recording(folder).photometric
+    shutil.rmtree(folder / "arsim")
+    rec = load_recording(folder)
+    original = load_recording(exported["arsim"])
+    assert [f["exposure_ns"] for f in rec.frames] == [f["exposure_ns"] for f in original.frames]
+    assert np.abs(rec.photometric.vignette - exact.vignette).max() <= 0.5 / 65535 + 1e-7
+    np.testing.assert_array_equal(rec.photometric.inverse_response, exact.inverse_response)
+    assert rec.groundtruth is not None  # (from mav0/mocap0)
+
+
+def test_a_bad_photometric_calibration_is_refused(exported, tmp_path):
+    folder = tmp_path / "bad"
+    shutil.copytree(exported["tumvi"], folder)
+    pcalib = folder / "dso" / "cam0" / "pcalib.txt"
+    values = pcalib.read_text().split()
+    pcalib.write_text(" ".join(values[:255]) + "\n")
+    assert_one_line_error(arsim("info", folder), str(pcalib), "255 values")
+    pcalib.write_text(" ".join(values) + "\n")
+    (folder / "arsim" / "vignette.exr").unlink()
+    png = folder / "dso" / "cam0" / "vignette.png"
+    import cv2
+
+    cv2.imwrite(str(png), np.full((10, 10), 65535, np.uint16))
+    assert_one_line_error(arsim("capture", folder, "-o", tmp_path / "cap"), "vignette is 10 x 10", "96 x 72")
+
+
 def _bag(path, topics):
     """A ROS 2 bag written straight through rosbags (not arsim): topics {name: (msgtype, [(t_ns, msg)])}."""
     from rosbags.rosbag2 import Writer
@@ -254,12 +285,17 @@ def test_a_camera_without_intrinsics_is_refused(exported, tmp_path):
                           "CameraInfo", "intrinsics")
 
 
-def test_a_bag_without_an_image_topic_is_refused(tmp_path):
+def test_a_bag_without_an_image_topic_is_refused(exported, tmp_path):
     assert_one_line_error(arsim("info", _foreign_bag(tmp_path / "bag", image=False)), "no image topic")
     (tmp_path / "broken").mkdir()
     (tmp_path / "broken" / "metadata.yaml").write_text("rosbag2_bagfile_information: [")
     assert_one_line_error(arsim("export", tmp_path / "broken", "--format", "euroc", "-o", tmp_path / "out"), "ROS 2 bag")
     assert not (tmp_path / "out").exists()
+    cut = tmp_path / "cut"
+    shutil.copytree(exported["rosbag2"], cut, ignore=shutil.ignore_patterns("ar"))
+    data = (cut / "recording.mcap").read_bytes()
+    (cut / "recording.mcap").write_bytes(data[: len(data) // 2])
+    assert_one_line_error(arsim("info", cut), str(cut))
 
 
 def test_render_takes_a_recording_in_a_layout_and_renders_what_the_original_gives(exported, tmp_path):
@@ -272,3 +308,39 @@ def test_render_takes_a_recording_in_a_layout_and_renders_what_the_original_give
         metrics[kind] = json.loads((tmp_path / kind / "metrics.json").read_text())
         assert not (tmp_path / kind / "recording").exists()  # rendered as it is, not recorded again
     assert metrics["euroc"]["frames_total"] == 16 and metrics["euroc"]["flip_mean"] == metrics["arsim"]["flip_mean"]
+
+
+MUTATIONS = {
+    "emptied": lambda text: "",
+    "cut in half": lambda text: text[: len(text) // 2],
+    "a number made nan": lambda text: text.replace("0.", "nan", 1) if "0." in text else text + "nan\n",
+    "a number made x": lambda text: text.replace("1", "x", 3),
+    "a line doubled": lambda text: "\n".join((lines := text.splitlines())[:3] + lines[2:]) + "\n",
+    "binary": lambda text: "\x00\xff" * 10,
+}
+
+
+@pytest.mark.parametrize("kind", ["euroc", "tumvi"])
+def test_damaged_layouts_are_read_or_refused_never_crash(exported, tmp_path, kind):
+    """Every text file of an export, damaged several ways: each load either reads or raises ArsimError (which the
+    command line turns into one line), never another exception."""
+    from arsim.core.errors import ArsimError
+
+    source = exported[kind]
+    files = [p.relative_to(source) for p in sorted(source.rglob("*"))
+             if p.suffix in (".csv", ".yaml", ".txt", ".json") and "ar" not in p.relative_to(source).parts[:1]]
+    assert len(files) >= 10
+    refused = 0
+    for k, name in enumerate(files):
+        for how, mutate in MUTATIONS.items():
+            folder = tmp_path / f"{k}-{how.replace(' ', '_')}"
+            shutil.copytree(source, folder, ignore=shutil.ignore_patterns("ar"))
+            (folder / name).write_text(mutate((source / name).read_text(encoding="utf-8")), encoding="utf-8",
+                                       errors="surrogateescape")
+            try:
+                load_recording(folder)
+            except ArsimError as exc:
+                assert "\n" not in str(exc)
+                refused += 1
+            shutil.rmtree(folder)
+    assert refused > len(files) * 2  # most damage is noticed
