@@ -709,7 +709,8 @@ def _info_parser(sub: argparse._SubParsersAction) -> None:
                  "or check a recording or a run directory (every file its manifest lists) and summarise it",
                  "arsim info assets/envmaps/sunrise.exr   (or: arsim info rec, arsim info run)")
     p.add_argument("file", type=_path, metavar="FILE",
-                   help="OpenEXR (.exr) or Radiance (.hdr) image, a recording folder or a run directory")
+                   help="OpenEXR (.exr) or Radiance (.hdr) image, a recording (arsim's, EuRoC's or TUM-VI's folder, or a "
+                   "ROS 2 bag) or a run directory")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(run=cmd_info)
 
