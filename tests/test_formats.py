@@ -144,6 +144,11 @@ def test_a_euroc_folder_from_elsewhere_is_read_without_the_extras(exported, tmp_
     shutil.rmtree(folder / "mav0" / "state_groundtruth_estimate0")
     rec = load_recording(folder)
     assert rec.groundtruth is None and len(rec.orientation[0]) == len(t)
+    from arsim.sensors.formats import write_recording
+
+    write_recording(rec, "rosbag2", tmp_path / "bag")  # (a recording without a truth written, and read back so)
+    again = open_recording(tmp_path / "bag")
+    assert again.groundtruth is None and "scenario_toml" not in again.meta and len(again.frames) == len(rec.frames)
     r = arsim("info", folder)
     assert r.returncode == 0 and "euroc layout" in r.stdout, r.stderr
 
@@ -222,6 +227,13 @@ def test_a_bag_from_elsewhere_is_read(tmp_path):
     assert (read_frame(rec.folder / rec.frames[2]["file"]) == 80).all()
     r = arsim("info", tmp_path / "bag")
     assert r.returncode == 0 and "rosbag2 layout" in r.stdout, r.stderr
+    import gc
+
+    folder = rec.folder  # the temporary folder holding the bag's frames goes with the recording
+    assert folder.is_dir() and folder != tmp_path / "bag"
+    del rec
+    gc.collect()
+    assert not folder.exists()
 
 
 def test_a_photometric_calibration_replaces_the_burst(exported, original_probe):
