@@ -253,7 +253,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
     source = args.source
     given = read_estimates(args.file, 10**9) if args.file is not None else None  # bad lines fail here, first
-    if source is not None and source.is_dir():
+    if source is not None and (source.is_dir() or detect_format(source) is not None):
         rec = load_recording(source)
         if given is not None:
             read_estimates(args.file, len(rec.frames))  # (and frames beyond the recording's)
