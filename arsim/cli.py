@@ -27,6 +27,7 @@ from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 from arsim.scenario.loader import scenario_path
+from arsim.sensors.formats import FORMATS as RECORDING_FORMATS, detect_format
 from arsim.sensors.recording import load_recording, recording_segments
 
 MAX_SIZE = 16384
@@ -86,7 +87,7 @@ def _fmt(v: float | None) -> str:
 def cmd_info(args: argparse.Namespace) -> int:
     if (args.file / "manifest.json").is_file():
         return _run_info(args)
-    if args.file.is_dir():
+    if args.file.is_dir() or detect_format(args.file) is not None:  # arsim's, EuRoC's, TUM-VI's, a ROS 2 bag
         return _recording_info(args)
     stats = image_stats(read_hdr(args.file))
     if args.json:
@@ -136,6 +137,7 @@ def _recording_info(args: argparse.Namespace) -> int:
     summary = {
         "recording": str(args.file),
         "format": rec.meta["format"],
+        "layout": rec.meta.get("source_format", "arsim"),
         "seed": rec.meta["seed"],
         "duration_s": rec.meta["duration_s"],
         "frames": len(rec.frames),
@@ -144,6 +146,8 @@ def _recording_info(args: argparse.Namespace) -> int:
         "fusion": rec.meta["fusion"],
         "segment": rec.meta.get("segment", "capture"),
         "frames_decoded": decoded,
+        "ground_truth": rec.groundtruth is not None,
+        "photometric_calibration": rec.photometric is not None,
     }
     if "table" in rec.meta:
         summary["tag"] = {k: rec.meta["table"][k] for k in ("tag_family", "tag_id", "tag_size_m")}
@@ -153,7 +157,8 @@ def _recording_info(args: argparse.Namespace) -> int:
         print(json.dumps(summary, indent=2))
         return 0
     cam = summary["camera"]
-    print(f"{'recording':<12} {args.file} ({summary['format']}, seed {summary['seed']})")
+    print(f"{'recording':<12} {args.file} ({summary['format']}" + (f", read from its {summary['layout']} layout" if summary["layout"] != "arsim" else "")
+          + f", seed {summary['seed']})")
     print(f"{'duration':<12} {summary['duration_s']:.1f} s, {summary['frames']} frames of {cam['width']} x {cam['height']} at {cam['fps']:g} fps")
     print(f"{'IMU':<12} " + ", ".join(f"{name} {n}" for name, n in summary["imu_samples"].items()) + " samples")
     print(f"{'fusion':<12} {summary['fusion']}")
@@ -193,8 +198,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
     from arsim.run.stages import captured_sweep, measured_capture
 
     source = args.source
-    if source is not None and source.is_dir():
-        rec = load_recording(source)
+    if source is not None and (source.is_dir() or detect_format(source) is not None):
+        rec = load_recording(source)  # (any layout: README, Recordings in standard layouts)
         settings = CaptureSettings.of(recording_scenario(rec), args.size, args.align_every)
         with _output(args, source) as work:
             _, metrics = measured_capture(rec, settings, work, _bar)
@@ -216,6 +221,26 @@ def cmd_capture(args: argparse.Namespace) -> int:
     return 0
 
 
+# arsim export
+
+
+def _export_recording(args: argparse.Namespace) -> int:
+    """A recording (and its AR path) in EuRoC's, TUM-VI's or a ROS 2 bag's layout."""
+    from arsim.run.stages import exported_recording
+    from arsim.sensors.formats import open_recording
+
+    layout = args.format[0]
+    rec = open_recording(args.input)  # a recording that cannot be read fails here, before any output
+    with _output(args, args.input) as work:
+        written = exported_recording(rec, args.input, layout, work, _bar)
+    out = args.output
+    ar = f", the AR path's {len(written[1][0].frames)} in {out / 'ar'}" if len(written) > 1 else ""
+    calibrated = layout == "tumvi" and (out / "dso" / "cam0" / "pcalib.txt").is_file()
+    print(f"wrote {len(written[0][0].frames)} frames as {layout} to {out}{ar}"
+          + ("; the photometric calibration in dso/cam0" if calibrated else ""))
+    return 0
+
+
 # arsim estimate
 
 
@@ -225,7 +250,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
     source = args.source
     given = read_estimates(args.file, 10**9) if args.file is not None else None  # bad lines fail here, first
-    if source is not None and source.is_dir():
+    if source is not None and (source.is_dir() or detect_format(source) is not None):
         rec = load_recording(source)
         if given is not None:
             read_estimates(args.file, len(rec.frames))  # (and frames beyond the recording's)
@@ -265,9 +290,15 @@ def cmd_render(args: argparse.Namespace) -> int:
     from arsim.lighting.bake_output import read_bake
     from arsim.render.content import scene_objects
     from arsim.render.session import SessionSettings, check_maps, maps_needed
-    from arsim.run.stages import render_session
+    from arsim.capture.pipeline import recording_scenario
+    from arsim.run.stages import recorded_pair, render_session
 
-    scenario = load_scenario(args.scenario)
+    recording = None
+    if args.scenario is not None and detect_format(args.scenario) is not None:  # a recording made before, any layout
+        recording = recorded_pair(args.scenario)
+        scenario = recording_scenario(recording[0])
+    else:
+        scenario = load_scenario(args.scenario)
     if not scenario.ar.enabled:
         raise ArsimError(f"{args.scenario or 'the scenario'}: [ar] enabled = false; the session needs the AR path: set it to true")
     recording_segments(scenario)
@@ -295,7 +326,7 @@ def cmd_render(args: argparse.Namespace) -> int:
                                flip_every=r.flip_every)
     source = str(args.env) if args.env is not None else ", ".join(map(str, args.maps)) if args.maps else "captured"
     with _output(args, _scenario_file(args.scenario), args.env, *(args.maps or ())) as work:
-        metrics = render_session(scenario, work, settings, map_size, probe, maps, source, _bar, objects)
+        metrics = render_session(scenario, work, settings, map_size, probe, maps, source, _bar, objects, recording)
     out = args.output
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: {_tracking_p95(metrics)}; "
           f"FLIP against the truth frame {metrics['flip_mean']:.4f}; metrics in {out / 'metrics.json'}")
@@ -380,6 +411,18 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
+    """A recording into another layout, or maps / a probe into the formats engines load: the formats say which."""
+    recording = [f for f in args.format if f in RECORDING_FORMATS]
+    if recording and len(recording) != len(args.format):
+        raise ArsimError(f"--format {','.join(args.format)} mixes a recording's layout ({', '.join(RECORDING_FORMATS)}) with "
+                         "maps' formats; export a recording or maps, one at a time")
+    if recording:
+        given = [name for name, value in (("--env", args.env), ("--size", args.size)) if value is not None]
+        if given:
+            raise ArsimError(f"{' and '.join(given)} apply to maps and probes, not to a recording; leave them out")
+        if len(recording) > 1:
+            raise ArsimError(f"--format {','.join(args.format)}: a recording is written in one layout at a time; give one")
+        return _export_recording(args)
     return _export_maps(args)
 
 
@@ -707,7 +750,8 @@ def _info_parser(sub: argparse._SubParsersAction) -> None:
                  "or check a recording or a run directory (every file its manifest lists) and summarise it",
                  "arsim info assets/envmaps/sunrise.exr   (or: arsim info rec, arsim info run)")
     p.add_argument("file", type=_path, metavar="FILE",
-                   help="OpenEXR (.exr) or Radiance (.hdr) image, a recording folder or a run directory")
+                   help="OpenEXR (.exr) or Radiance (.hdr) image, a recording (arsim's, EuRoC's or TUM-VI's folder, or a "
+                   "ROS 2 bag) or a run directory")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(run=cmd_info)
 
@@ -760,15 +804,19 @@ def _bake_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _export_parser(sub: argparse._SubParsersAction) -> None:
-    p = _command(sub, "export", "write maps for engines: a bake folder (MAPS) or a light probe (PROBE) as KTX2 cube maps "
-                 "(GGX chain, radiance, Phong maps, BRDF table), Filament's sh.txt, a glTF scene with "
-                 "EXT_lights_image_based, cube faces or equirects",
-                 "arsim export maps -o engine --format ktx2,filament,gltf   (or: arsim export assets/envmaps/city.exr -o city --format gltf)")
-    p.add_argument("input", type=_path, metavar="MAPS|PROBE",
-                   help="a folder written by `arsim bake`, or an HDR image (.exr or .hdr), angle map 1:1 or equirect 2:1")
-    _output_option(p, "output folder")
-    p.add_argument("--format", type=lambda t: [f for f in t.split(",") if f.strip()], required=True, metavar="F,F,...",
-                   help="one or more of: ktx2, filament, gltf, faces, equirect (README: Maps for engines)")
+    p = _command(sub, "export", "write a recording in a layout other tools read (EuRoC / ASL folders, TUM-VI's with "
+                 "exposure times and the photometric calibration, a ROS 2 bag), or maps for engines: a bake folder (MAPS) or "
+                 "a light probe (PROBE) as KTX2 cube maps (GGX chain, radiance, Phong maps, BRDF table), Filament's sh.txt, "
+                 "a glTF scene with EXT_lights_image_based, cube faces or equirects",
+                 "arsim export maps -o engine --format ktx2,filament,gltf   (or: arsim export rec --format euroc -o rec_euroc; "
+                 "arsim export assets/envmaps/city.exr -o city --format gltf)")
+    p.add_argument("input", type=_path, metavar="RECORDING|MAPS|PROBE",
+                   help="a recording (arsim's, EuRoC's, TUM-VI's folder or a ROS 2 bag), a folder written by `arsim bake`, "
+                        "or an HDR image (.exr or .hdr), angle map 1:1 or equirect 2:1")
+    _output_option(p, "output folder (a recording's AR path goes to DIR/ar)")
+    p.add_argument("--format", type=lambda t: [f.strip() for f in t.split(",") if f.strip()], required=True, metavar="F,F,...",
+                   help=f"a recording: one of {', '.join(RECORDING_FORMATS)} (README: Recordings in standard layouts); maps "
+                        "or a probe: one or more of ktx2, filament, gltf, faces, equirect (README: Maps for engines)")
     p.add_argument("--env", type=_path, metavar="PROBE",
                    help="MAPS: the probe they were baked from (default: the one bake.json names, if found)")
     p.add_argument("--size", type=_size, metavar="N",
@@ -855,7 +903,8 @@ def _capture_parser(sub: argparse._SubParsersAction) -> None:
                  "by feature alignment, and measure it against the truth (records the scenario's sweep first if given one)",
                  "arsim capture rec -o capture   (or: arsim capture scenarios/indoor.toml -o capture)")
     p.add_argument("source", type=_path, nargs="?", metavar="SCENARIO|RECORDING",
-                   help="a recording folder, or a scenario (.toml or a bundled name) to record first; default: the embedded default scenario")
+                   help="a recording (arsim's, EuRoC's or TUM-VI's folder, or a ROS 2 bag), or a scenario (.toml or a "
+                   "bundled name) to record first; default: the embedded default scenario")
     _output_option(p, "output folder")
     p.add_argument("--size", type=_map_size, metavar="N", help="N of the captured N x N angle map (default: [capture] capture_size, 512)")
     p.add_argument("--align-every", type=_positive("--align-every"), metavar="K",
@@ -878,10 +927,12 @@ def _estimate_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=cmd_estimate)
 
 
-def _session_options(p: argparse.ArgumentParser, env_help: str) -> None:
-    """What render and profile share: the scenario, the output folder, the light's file, the maps' size."""
-    p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO",
-                   help=SCENARIO_HELP)
+def _session_options(p: argparse.ArgumentParser, env_help: str, recording: bool = False) -> None:
+    """What render and profile share: the scenario (or, for render, a recording), the output folder, the light's
+    file, the maps' size."""
+    p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO|RECORDING" if recording else "SCENARIO",
+                   help=SCENARIO_HELP + ("; or a recording with its AR path (arsim's, EuRoC's or TUM-VI's folder, "
+                                         "or a ROS 2 bag), rendered as it is" if recording else ""))
     _output_option(p, "output folder")
     p.add_argument("--env", type=_path, metavar="PROBE.exr", help=env_help)
     p.add_argument("--map-size", type=_map_size, metavar="N", help="N of the N x N maps (default: [render] map_size, 128)")
@@ -892,7 +943,7 @@ def _render_parser(sub: argparse._SubParsersAction) -> None:
                  "render the virtual objects lit by the maps, tone-map them over the camera frames, and compare each "
                  "frame with the truth frame (the objects lit by the true environment's maps) by FLIP",
                  "arsim render -o session   (or: arsim render scenarios/indoor.toml -o session --env probe.exr --method sh)")
-    _session_options(p, "light the objects with this environment instead of the captured probe")
+    _session_options(p, "light the objects with this environment instead of the captured probe", recording=True)
     p.add_argument("--maps", type=_path, nargs="+", metavar="DIR",
                    help="light the objects with maps baked before (`arsim bake` folders, one per method) instead of the captured probe")
     p.add_argument("--method", choices=sorted(METHODS),
@@ -983,8 +1034,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"arsim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for add in (_info_parser, _convert_parser, _bake_parser, _export_parser, _bases_parser, _prt_parser, _estimate_parser, _compare_methods_parser, _record_parser,
-                _capture_parser, _render_parser, _profile_parser, _run_parser, _batch_parser, _diff_parser, _validate_parser):
+    for add in (_info_parser, _convert_parser, _bake_parser, _bases_parser, _prt_parser, _estimate_parser, _compare_methods_parser, _record_parser,
+                _capture_parser, _export_parser, _render_parser, _profile_parser, _run_parser, _batch_parser, _diff_parser, _validate_parser):
         add(sub)
     return parser
 

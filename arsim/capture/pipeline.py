@@ -17,7 +17,7 @@ from arsim.capture.align import Aligner
 from arsim.capture.direct import DirectImages
 from arsim.capture.drift import DriftFilter
 from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
-from arsim.capture.response import RecoveredResponse, calibrate_response
+from arsim.capture.response import RecoveredResponse, calibrate_response, photometric_response
 from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.errors import ArsimError
 from arsim.core.png import read_frame
@@ -69,6 +69,9 @@ class CaptureResult:
 
 def recording_scenario(rec: Recording) -> Scenario:
     """The scenario a recording was made from (its meta.json keeps it)."""
+    if "scenario_toml" not in rec.meta:
+        raise ArsimError(f"{rec.folder}: the recording names no scenario (it was not made by arsim); this arsim "
+                         "captures recordings that keep their scenario")
     return parse_scenario(rec.meta["scenario_toml"], str(rec.folder / "meta.json"), rec.folder)
 
 
@@ -79,6 +82,21 @@ def burst_response(rec: Recording, sensor: SensorSettings) -> RecoveredResponse:
     frames = [read_frame(rec.folder / b["file"]) for b in rec.burst]
     products = np.array([b["exposure_ns"] / 1e9 * b["iso"] / sensor.base_iso for b in rec.burst])
     return calibrate_response(frames, products)
+
+
+def recording_response(rec: Recording, sensor: SensorSettings) -> RecoveredResponse:
+    """The camera's inverse response: the recording's photometric calibration where it carries one (TUM-VI's
+    pcalib.txt, codes to 0-255 irradiance, scaled to 1 at 255), else calibrated from its burst."""
+    if rec.photometric is not None:
+        return photometric_response(rec.photometric.inverse_response)
+    return burst_response(rec, sensor)
+
+
+def recording_falloff(rec: Recording, camera, sensor: SensorSettings) -> np.ndarray:
+    """The frames' vignetting: the recording's calibrated vignette where it carries one, else the sensor's."""
+    if rec.photometric is not None:
+        return rec.photometric.vignette.astype(np.float64)
+    return vignette(camera.height, camera.width, sensor.vignetting)
 
 
 def fused_camera_orientations(rec: Recording) -> Rotation:
@@ -150,7 +168,7 @@ def accumulate_frames(rec: Recording, orientations: Rotation, response: Recovere
     sensor = SensorSettings.of(scenario.device.camera)
     camera = recording_camera(rec)
     levels = sorted(set(bracket), reverse=True)
-    accumulator = new_accumulator(size, camera, vignette(camera.height, camera.width, sensor.vignetting), sensor, len(levels))
+    accumulator = new_accumulator(size, camera, recording_falloff(rec, camera, sensor), sensor, len(levels))
     files, scales, gain = [rec.folder / f["file"] for f in rec.frames], exposure_scales(rec, sensor), gains(rec, sensor)
     times = np.array([f["t_ns"] for f in rec.frames]) / 1e9
     with ThreadPoolExecutor(2) as readers:
@@ -175,8 +193,8 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     bracket = scenario.capture.bracket_ev  # frame k was taken at offset bracket[k % len]; 0: metered
     sensor = SensorSettings.of(scenario.device.camera)
     camera = recording_camera(rec)
-    falloff = vignette(camera.height, camera.width, sensor.vignetting)
-    response = burst_response(rec, sensor)
+    falloff = recording_falloff(rec, camera, sensor)
+    response = recording_response(rec, sensor)
     exposure_levels = sorted(set(bracket), reverse=True)  # the accumulator's levels, longest exposure first
     accumulator = new_accumulator(settings.size, camera, falloff, sensor, len(exposure_levels))
     aligner = Aligner(camera, falloff, response, scenario.run.seed)

@@ -127,6 +127,13 @@ def _by_median_codes(frames: list[np.ndarray], products: np.ndarray, linear: np.
     return out
 
 
+def photometric_response(inverse_response: np.ndarray) -> RecoveredResponse:
+    """A photometric calibration's inverse response (DSO's and TUM-VI's pcalib.txt: each code's irradiance, 255 at
+    full scale) as the capture takes it: relative exposure, 1 at full scale, the same for the three channels."""
+    linear = np.asarray(inverse_response, dtype=np.float64) / 255.0
+    return RecoveredResponse(np.repeat(linear[:, None], 3, axis=1))
+
+
 def response_error(recovered: RecoveredResponse, true_linear: np.ndarray) -> dict:
     """Relative error of the recovered inverse response against the true one (256,) over ERROR_CODES,
     in percent: median and max over codes and channels."""

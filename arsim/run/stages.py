@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from arsim.capture.accumulate import filled
-from arsim.capture.pipeline import CaptureResult, CaptureSettings, burst_response, capture, recording_scenario
+from arsim.capture.pipeline import CaptureResult, CaptureSettings, capture, recording_response, recording_scenario
 from arsim.capture.response import response_error
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
@@ -188,19 +188,23 @@ def session_probe(result: CaptureResult, map_size: int) -> np.ndarray:
 
 
 def session_inputs(scenario: Scenario, out: Path, probe: np.ndarray | None, map_size: int, capture_probe: bool = True,
-                   stage: Stage = quiet_stage):
-    """What an AR session needs: the scenario recorded into out/recording, its AR part, the light probe
+                   stage: Stage = quiet_stage, recording: tuple[Recording, Recording] | None = None):
+    """What an AR session needs: the scenario recorded into out/recording (or the sweep and AR path of
+    `recording`, made before), its AR part, the light probe
     (`probe` where given, else captured from the sweep; None when not wanted) as a map_size angle map, and
     the camera's response (from the capture, or from the sweep's burst), and the probe as it grew (the
     capture's snapshots; empty where none was captured)."""
-    with stage("recording the sweep and the AR path") as update:
-        record(scenario, out / "recording", progress=lambda f: update(completed=f))
-    sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
+    if recording is None:
+        with stage("recording the sweep and the AR path") as update:
+            record(scenario, out / "recording", progress=lambda f: update(completed=f))
+        sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
+    else:
+        sweep, ar = recording
     if probe is None and capture_probe:
         with stage("capturing the light probe") as update:
             result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
         return ar, session_probe(result, map_size), result.response, [light for _, light in result.snapshots]
-    return ar, probe, burst_response(sweep, SensorSettings.of(scenario.device.camera)), []
+    return ar, probe, recording_response(sweep, SensorSettings.of(scenario.device.camera)), []
 
 
 def with_scenario(settings: SessionSettings, scenario: Scenario, snapshots: list) -> SessionSettings:
@@ -217,15 +221,17 @@ def with_scenario(settings: SessionSettings, scenario: Scenario, snapshots: list
 
 def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map_size: int, probe: np.ndarray | None = None,
                    maps: dict | None = None, source: str = "captured", stage: Stage = quiet_stage,
-                   objects: list | None = None) -> dict:
-    """The AR session of a scenario into out: recorded, the probe captured (or `probe`), the objects
+                   objects: list | None = None, recording: tuple[Recording, Recording] | None = None) -> dict:
+    """The AR session of a scenario into out: recorded (or `recording`'s sweep and AR path, made before), the
+    probe captured (or `probe`), the objects
     (scene_objects of the scenario, unless given) lit by maps from it (or by `maps` baked before), each
     frame scored against its truth frame; metrics.json written; returns the metrics."""
     objects = scene_objects(scenario.render, scenario.ar.table_albedo) if objects is None else objects
     needed = maps_needed(objects, settings.method)
     if maps is not None:
         check_maps(maps, needed)
-    ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None, stage=stage)
+    ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None, stage=stage,
+                                                  recording=recording)
     settings = with_scenario(settings, scenario, growing)
     truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
     with stage(f"computing the maps ({', '.join(needed)})"):
@@ -238,6 +244,45 @@ def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map
                                                  "log_average": settings.log_average, "probe": source}
     write_text_atomic(out / "metrics.json", json_text(metrics))
     return metrics
+
+
+def recorded_pair(source: Path) -> tuple[Recording, Recording]:
+    """A recording made before, in any layout (README: Recordings in standard layouts), and its AR path."""
+    from arsim.sensors.formats import ar_source, open_recording
+
+    sweep = open_recording(source)
+    ar = ar_source(source, sweep)
+    if ar is None:
+        raise ArsimError(f"{source}: the recording has no AR path (its meta names no ar_recording, or ar/ is not a "
+                         "recording); the AR session needs one: record a scenario with [ar] enabled = true")
+    return sweep, open_recording(ar)
+
+
+def tumvi_photometric(rec: Recording):
+    """The photometric calibration a TUM-VI export carries for an arsim recording: the inverse response as the
+    capture calibrates it from the burst (so that a capture of the export uses what a capture of the recording
+    does) and the camera's vignette; None for a recording without a burst (the AR path's)."""
+    from arsim.capture.pipeline import burst_response
+    from arsim.sensors.camera import vignette
+    from arsim.sensors.formats.common import Photometric
+    from arsim.sensors.frames import recording_camera
+
+    if not rec.burst or "scenario_toml" not in rec.meta:
+        return None
+    sensor = SensorSettings.of(recording_scenario(rec).device.camera)
+    camera = recording_camera(rec)
+    return Photometric(255.0 * burst_response(rec, sensor).linear[:, 0],
+                       vignette(camera.height, camera.width, sensor.vignetting).astype(np.float32))
+
+
+def exported_recording(rec: Recording, source: Path, kind: str, out: Path, stage: Stage = quiet_stage) -> list:
+    """A recording (any layout, read from source) and its AR path written in EuRoC's, TUM-VI's or a ROS 2 bag's layout into out
+    (the AR path into out/ar); TUM-VI's photometric calibration from the burst where the recording has none.
+    Returns [(recording, folder)] as written."""
+    from arsim.sensors.formats import export_recording
+
+    with stage(f"writing the recording as {kind}"):
+        return export_recording(rec, source, kind, out, tumvi_photometric)
 
 
 def profile_session(scenario: Scenario, out: Path, bakes: Sequence[BakeSettings], budget_ms: float, max_frames: int,

@@ -25,6 +25,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -42,6 +43,9 @@ from arsim.sensors.imu import SensorStream, sensor_model, simulate_imu
 from arsim.sensors.table import Table
 from arsim.sensors.trajectory import ARPath, CaptureSweep, Trajectory, camera_mount
 from arsim.sensors.views import CameraRenderer
+
+if TYPE_CHECKING:
+    from arsim.sensors.formats.common import Photometric
 
 FORMAT = "arsim-recording/1"
 MAX_PENDING_FRAMES = 8
@@ -319,6 +323,9 @@ class Recording:
     imu: dict[str, SensorStream]
     orientation: tuple[np.ndarray, Rotation]
     groundtruth: tuple[np.ndarray, np.ndarray, Rotation]
+    # a camera's photometric calibration where the recording carries one (TUM-VI's): the capture uses it
+    # instead of calibrating the response from the burst (README: Recordings in standard layouts)
+    photometric: Photometric | None = None
 
 
 # meta.json as a recording declares it (README: Recording format): key -> (type, what it must hold);
@@ -452,6 +459,10 @@ def load_recording(folder: Path) -> Recording:
     """Read and check a recording; every problem is one ArsimError naming the file and what to fix."""
     folder = Path(folder)
     if not (folder / "meta.json").exists():
+        from arsim.sensors.formats import detect_format, open_recording
+
+        if detect_format(folder) is not None:  # a EuRoC / TUM-VI folder or a ROS 2 bag
+            return open_recording(folder)
         raise ArsimError(f"{folder}: not a recording (no meta.json); give a folder written by arsim record")
     try:
         meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
