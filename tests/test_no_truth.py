@@ -189,3 +189,14 @@ def test_apes_rotation_rmse_is_arsims_orientation_rms_and_the_tum_files_read_bac
     ape = evo_metrics.APE(evo_metrics.PoseRelation.rotation_angle_deg)
     ape.process_data((truth, estimate))
     assert abs(ape.get_statistic(evo_metrics.StatisticsType.rmse) - m["ape_rot_rmse_deg_corrected"]) < 1e-6
+
+
+def test_a_recording_with_nothing_to_linearise_its_frames_is_refused_in_one_line(recordings, tmp_path):
+    from tests.test_cli import assert_one_line_error
+
+    rec = tmp_path / "rec"
+    shutil.copytree(recordings["nothing"], rec, ignore=shutil.ignore_patterns("ar", "burst"))
+    (rec / "burst.csv").write_text("exposure_ns,iso,file\n")
+    assert_one_line_error(arsim("capture", rec, "-o", tmp_path / "out"), str(rec), "no response burst",
+                          "no photometric calibration")
+    assert not (tmp_path / "out").exists()

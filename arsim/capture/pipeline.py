@@ -68,8 +68,8 @@ class CaptureResult:
 
 def burst_response(rec: Recording, sensor: SensorSettings) -> RecoveredResponse:
     if not rec.burst:
-        raise ArsimError(f"{rec.folder}: the recording has no response burst (burst.csv is empty); record it with "
-                         "[capture] burst_frames >= 2")
+        raise ArsimError(f"{rec.folder}: nothing to linearise its frames with: no response burst (burst.csv is empty) "
+                         "and no photometric calibration; record it with [capture] burst_frames >= 2 (a bracketed burst)")
     frames = [read_frame(rec.folder / b["file"]) for b in rec.burst]
     products = np.array([b["exposure_ns"] / 1e9 * b["iso"] / sensor.base_iso for b in rec.burst])
     return calibrate_response(frames, products)
