@@ -123,7 +123,8 @@ def _run_info(args: argparse.Namespace) -> int:
           f"{summary['files']} files, {summary['bytes'] / 1e6:.1f} MB, as manifest.json lists them")
     print(f"stages     {stages}")
     print(f"session    {s['frames_total']} frames ({s['frames_lost']} with the tag lost), {_tracking_p95(s)}, "
-          "FLIP against the truth frame " + (f"{s['flip_mean']:.4f}" if s.get("flip_mean") is not None else "not computed"))
+          + ("frames not scored (the true environment is unknown)" if "flip_mean" not in s else
+             "FLIP against the truth frame " + (f"{s['flip_mean']:.4f}" if s["flip_mean"] is not None else "not computed")))
     for why in manifest["metrics"].get("truth", {}).values():
         print(f"truth      {why}")
     return 0

@@ -70,9 +70,14 @@ ESTIMATE_COLUMNS = (("sh_error", "SH error, % of the truth's", 100, 1), ("main_l
                     ("ar_flip_mean", "AR objects' FLIP vs truth frame", 1, 4))
 
 
+def _why(reason: str) -> str:
+    """metrics.json's "truth" reason without its "absent: " (the report's sentences say it)."""
+    return reason.removeprefix("absent: ")
+
+
 def _absent(why: str) -> str:
     """A section's note on what it leaves out, and why (metrics.json's "truth")."""
-    return f'<p class="absent">Left out: {html.escape(why)}.</p>'
+    return f'<p class="absent">Left out: {html.escape(_why(why))}.</p>'
 
 
 def _estimates_section(out: Path, estimates: dict, absent: str | None = None) -> str:
@@ -87,7 +92,7 @@ def _estimates_section(out: Path, estimates: dict, absent: str | None = None) ->
 <p>What ARCore, ARKit and WebXR give an app instead of a probe, estimated over the sweep by the capture (from its
 probe as it grew) and from each frame alone (<code>single</code>): every frame's estimates in
 estimates/estimates.jsonl, the platforms' structures in estimates/platforms/.</p>
-{_absent("the estimates' scores (" + absent + ")")}
+{_absent("the estimates' scores (" + _why(absent) + ")")}
 <h3>The three spheres (diffuse, matte silver, mirror), lit by each estimate</h3>
 {_img(folder / 'spheres.png', 'spheres', 400)}
 <h3>The AR objects lit by each estimate</h3>
@@ -139,29 +144,29 @@ def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, trac
                                                   "tracking_trans_err_mm_p95", "flip_mean") if k in s]
     frames = sorted((out / "frames").glob("*.png"))
     flip_of = dict(zip((int(k) for k in s["frames_rendered"]), s.get("flip_per_frame", [])))
-    figures = "".join(f"<figure>{_img(f, f.name, 420)}<figcaption>frame {int(f.stem)}: "
-                      + ("" if no_scene else "FLIP " + (f"{_num(flip_of.get(int(f.stem)), 4)}" if flip_of.get(int(f.stem)) is not None
+    figures = "".join(f"<figure>{_img(f, f.name, 420)}<figcaption>frame {int(f.stem)}"
+                      + ("" if no_scene else ": FLIP " + (f"{_num(flip_of.get(int(f.stem)), 4)}" if flip_of.get(int(f.stem)) is not None
                                                          else "n/a (no object drawn)"))
                       + "</figcaption></figure>" for f in frames)
     lost = s.get("frames_lost", 0)
     estimates = _estimates_section(out, metrics.get("estimates", {}), no_scene)
-    scored = ("the frames are not scored: " + html.escape(no_scene) if no_scene else
+    scored = ("the frames are not scored: " + html.escape(_why(no_scene)) if no_scene else
               f"FLIP against the truth frame: {_num(s.get('flip_mean'), 4)}, the mean over {s.get('flip_frames')} frames "
               f"({'every' if scenario.render.flip_every == 1 else f'every {scenario.render.flip_every}th'} frame with "
               "objects, and the frames shown)")
     if no_scene:
-        probe = f"""<h2 id="capture">Captured probe</h2>{_absent("the true environment beside it (" + no_scene + ")")}
+        probe = f"""<h2 id="capture">Captured probe</h2>{_absent("the true environment beside it (" + _why(no_scene) + ")")}
 {_img(out / 'capture' / 'probe.png', 'captured probe', 500)}"""
     else:
         probe = f"""<h2 id="capture">Captured probe and the truth</h2>{_img(out / 'capture' / 'probe_vs_truth.png', 'probe vs truth', 1100)}"""
     if no_scene:
-        maps_table = _absent("the maps' errors (" + no_scene + ")")
+        maps_table = _absent("the maps' errors (" + _why(no_scene) + ")")
     else:
         maps_table = f"""<p>Against the same method on the true environment (what the capture costs), against the true environment's accurate
 maps (capture and method together), and the method's own error on the true environment. Accurate and bounds maps are
 baked on the GL path (float32, held to the NumPy float64 sums within 1e-3 by the tests).</p>
 {_table(['method', 'map', 'vs truth, same method', 'vs truth, accurate', 'method on truth'], map_rows)}"""
-    truth_note = "".join(f"<li>{html.escape(why)}</li>" for why in absent.values())
+    truth_note = "".join(f"<li>{html.escape(_why(why))}</li>" for why in absent.values())
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>arsim run: {html.escape(scenario.run.name)}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1200px}} table{{border-collapse:collapse;margin:0.5em 0}}
@@ -187,9 +192,9 @@ lost in {lost} of them (no object drawn there); {scored}.</p>
 {maps_table}
 <h3>AR session</h3>{''.join(_absent(why) for why in absent.values())}{_table(['metric', 'value'], session_rows)}
 <h2 id="plots">Drift, tracking and frame time</h2>
-<h3>IMU drift and its correction</h3>{_absent("the drift against the truth (" + no_poses + "); shown: how far the capture turned the IMU's orientations") if no_poses else ''}
+<h3>IMU drift and its correction</h3>{_absent("the drift against the truth (" + _why(no_poses) + "); shown: how far the capture turned the IMU's orientations") if no_poses else ''}
 {_img(out / 'capture' / 'drift.png', 'drift', 900)}
-<h3>Tracking</h3>{_absent("the tracking's errors (" + no_poses + ")") if no_poses else _img(report / 'tracking.png', 'tracking', 900)}
+<h3>Tracking</h3>{_absent("the tracking's errors (" + _why(no_poses) + ")") if no_poses else _img(report / 'tracking.png', 'tracking', 900)}
 <h3>Frame time</h3>{_img(out / 'profile' / 'timeline.png', 'frame time', 1000)}
 </body></html>
 """
