@@ -200,3 +200,14 @@ def test_a_recording_with_nothing_to_linearise_its_frames_is_refused_in_one_line
     assert_one_line_error(arsim("capture", rec, "-o", tmp_path / "out"), str(rec), "no response burst",
                           "no photometric calibration")
     assert not (tmp_path / "out").exists()
+
+
+def test_estimate_without_the_true_environment_makes_the_estimates_and_scores_none(recordings, tmp_path):
+    out = tmp_path / "estimates"
+    printed = _ok(arsim("estimate", recordings["nothing"], "-o", out)).stdout
+    assert "no scores: the truth is absent" in printed
+    lines = [json.loads(line) for line in (out / "estimates.jsonl").read_text().splitlines()]
+    assert len(lines) == 11 and all("truth" not in line and "single" in line for line in lines) and "capture" in lines[-1]
+    assert json.loads((out / "scores.json").read_text()) == {"truth": NO_SCENARIO}
+    assert (out / "spheres.png").is_file() and not (out / "scores.png").exists()
+    assert sorted(p.name for p in (out / "platforms").glob("*_arcore.json")) == ["capture_arcore.json", "single_arcore.json"]
