@@ -81,6 +81,7 @@ def test_a_recording_without_groundtruth_loads_and_says_what_it_lacks(recordings
     assert truth_absent(load_recording(recordings["full"])) == {}
     # without its scenario, the default's sensor settings describe the recording
     assert recording_scenario(rec).run.name == "default"
+    assert recording_scenario(rec).capture.bracket_ev == (0.0,)  # (a camera's own stream: every frame metered)
     for name in ("no_groundtruth", "nothing"):
         out = _ok(arsim("info", recordings[name])).stdout
         assert "no groundtruth.csv" in out

@@ -4,9 +4,12 @@ that compares with the truth, or projects through the camera, reads them from he
 
 A recording arsim did not synthesise (a phone's, a data set's) has no groundtruth.csv, and no scenario_toml in
 its meta.json: `truth_absent` says which of the two truths is missing and what is left out for it, and
-`recording_scenario` gives the default scenario's sensor settings in place of the missing scenario."""
+`recording_scenario` gives the default scenario's sensor settings in place of the missing scenario (every frame
+metered)."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -30,10 +33,13 @@ NO_SCENARIO = ("absent: the recording's meta.json has no scenario_toml, so the t
 def recording_scenario(rec: Recording) -> Scenario:
     """The scenario a recording was made from (its meta.json keeps it); for a recording without one, the
     default scenario (arsim/scenario/default.toml), whose [capture] and [device] settings then describe
-    the sensors."""
+    the sensors, but for the exposure brackets: every frame is taken as metered ([capture] bracket_ev =
+    [0.0]). The brackets cycling through the sweep are arsim's recorder's; a camera's own stream has none
+    (its exposures are frames.csv's either way)."""
     text = rec.meta.get("scenario_toml")
     if text is None:
-        return load_scenario(None)
+        scenario = load_scenario(None)
+        return dataclasses.replace(scenario, capture=dataclasses.replace(scenario.capture, bracket_ev=(0.0,)))
     return parse_scenario(text, str(rec.folder / "meta.json"), rec.folder)
 
 
