@@ -115,7 +115,7 @@ def _run_info(args: argparse.Namespace) -> int:
     summary = {"run": str(args.file), "scenario": manifest["scenario"]["name"], "seed": manifest["seed"],
                "files": len(manifest["files"]), "bytes": sum(f["bytes"] for f in manifest["files"]),
                "seconds_per_stage": manifest["seconds_per_stage"], "frames_total": s["frames_total"],
-               "frames_lost": s["frames_lost"], "flip_mean": s["flip_mean"], "versions": manifest["versions"]}
+               "frames_lost": s["frames_lost"], "flip_mean": s.get("flip_mean"), "versions": manifest["versions"]}
     if args.json:
         print(json_text(summary), end="")
         return 0
@@ -124,12 +124,15 @@ def _run_info(args: argparse.Namespace) -> int:
           f"{summary['files']} files, {summary['bytes'] / 1e6:.1f} MB, as manifest.json lists them")
     print(f"stages     {stages}")
     print(f"session    {s['frames_total']} frames ({s['frames_lost']} with the tag lost), {_tracking_p95(s)}, "
-          "FLIP against the truth frame " + (f"{s['flip_mean']:.4f}" if s["flip_mean"] is not None else "not computed"))
+          + ("frames not scored (the true environment is unknown)" if "flip_mean" not in s else
+             "FLIP against the truth frame " + (f"{s['flip_mean']:.4f}" if s["flip_mean"] is not None else "not computed")))
+    for why in manifest["metrics"].get("truth", {}).values():
+        print(f"truth      {why}")
     return 0
 
 
 def _recording_info(args: argparse.Namespace) -> int:
-    from arsim.sensors.frames import check_frame_pixels
+    from arsim.sensors.frames import check_frame_pixels, truth_absent
 
     rec = load_recording(args.file)
     with progress_bar("decoding the frames", 1.0) as update:
@@ -148,6 +151,7 @@ def _recording_info(args: argparse.Namespace) -> int:
         "frames_decoded": decoded,
         "ground_truth": rec.groundtruth is not None,
         "photometric_calibration": rec.photometric is not None,
+        "truth_absent": truth_absent(rec),
     }
     if "table" in rec.meta:
         summary["tag"] = {k: rec.meta["table"][k] for k in ("tag_family", "tag_id", "tag_size_m")}
@@ -166,6 +170,9 @@ def _recording_info(args: argparse.Namespace) -> int:
     if "tag" in summary:
         tag = summary["tag"]
         print(f"{'tag':<12} {tag['tag_family']} id {tag['tag_id']}, {1000 * tag['tag_size_m']:g} mm, on the table at the origin")
+    absent = summary["truth_absent"]
+    print(f"{'truth':<12} " + ("ground-truth poses and the scenario (true environment, camera response)" if not absent else
+                               "; ".join(absent.values())))
     return 0
 
 
@@ -211,13 +218,22 @@ def cmd_capture(args: argparse.Namespace) -> int:
     out = args.output
     for warning in metrics["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
+    refined = (f"refined ({metrics['keyframes']} keyframes, {metrics['loop_closures']} matched pairs, "
+               f"{metrics['direct_pairs']} of them aligned directly)" if metrics["refined"] else "corrected")
+    if "orientation_rms_deg_corrected" in metrics:
+        orientation = (f"orientation error RMS {metrics['orientation_rms_deg_corrected']:.2f} degrees {refined}, "
+                       + (f"{metrics['orientation_rms_deg_online']:.2f} online, " if metrics["refined"] else "")
+                       + f"{metrics['orientation_rms_deg_uncorrected']:.2f} uncorrected (RPE over "
+                       f"{metrics['rpe_delta_frames']} frames {metrics['rpe_rot_rmse_deg_corrected']:.3f} degrees RMS)")
+    else:
+        orientation = f"orientations {refined}, not measured (no ground truth)"
+    irradiance = (f"irradiance map error {metrics['irradiance_mean_err_pct']:.2f} %" if "irradiance_mean_err_pct" in metrics
+                  else "probe not measured (the true environment is unknown)")
     print(f"captured {metrics['frames']} frames at {metrics['frames_per_second']:.1f} frames/s into {out / 'env.exr'}: "
-          f"{metrics['coverage_pct']:.2f} % covered; orientation error RMS {metrics['orientation_rms_deg_corrected']:.2f} degrees "
-          + (f"refined ({metrics['keyframes']} keyframes, {metrics['loop_closures']} matched pairs, "
-             f"{metrics['direct_pairs']} of them aligned directly), "
-             f"{metrics['orientation_rms_deg_online']:.2f} online, " if metrics["refined"] else "corrected, ")
-          + f"{metrics['orientation_rms_deg_uncorrected']:.2f} uncorrected; irradiance map error "
-          f"{metrics['irradiance_mean_err_pct']:.2f} %; metrics in {out / 'metrics.json'}")
+          f"{metrics['coverage_pct']:.2f} % covered; {orientation}; {irradiance}; metrics in {out / 'metrics.json'}, "
+          f"trajectories in {out}/trajectory_*.tum")
+    for why in metrics.get("truth", {}).values():
+        print(f"note: the truth is {why}")
     return 0
 
 
@@ -247,6 +263,7 @@ def _export_recording(args: argparse.Namespace) -> int:
 def cmd_estimate(args: argparse.Namespace) -> int:
     from arsim.estimate.series import read_estimates
     from arsim.run.stages import estimated_sweep, recorded_sweep
+    from arsim.sensors.frames import NO_SCENARIO
 
     source = args.source
     given = read_estimates(args.file, 10**9) if args.file is not None else None  # bad lines fail here, first
@@ -264,6 +281,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             if given is not None:
                 read_estimates(args.file, len(rec.frames))
             figures = estimated_sweep(rec, work, given, _bar).figures
+    if not figures:
+        print(f"no scores: the truth is {NO_SCENARIO}")
     for name, f in figures.items():
         diffuse = f["spheres"]["diffuse"]["rmse"] if "spheres" in f else None
         sphere = "" if diffuse is None else f"; diffuse sphere RMSE {100 * diffuse:.1f} %"
@@ -295,13 +314,18 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     recording = None
     if args.scenario is not None and detect_format(args.scenario) is not None:  # a recording made before, any layout
+        if args.recording is not None:
+            raise ArsimError(f"{args.scenario} is a recording and --recording gives another; give one of them")
         recording = recorded_pair(args.scenario)
         scenario = recording_scenario(recording[0])
     else:
         scenario = load_scenario(args.scenario)
-    if not scenario.ar.enabled:
-        raise ArsimError(f"{args.scenario or 'the scenario'}: [ar] enabled = false; the session needs the AR path: set it to true")
-    recording_segments(scenario)
+        if args.recording is not None:  # replayed with this scenario's objects
+            recording = recorded_pair(args.recording)
+    if recording is None:  # (recorded now: the scenario must make an AR path)
+        if not scenario.ar.enabled:
+            raise ArsimError(f"{args.scenario or 'the scenario'}: [ar] enabled = false; the session needs the AR path: set it to true")
+        recording_segments(scenario)
     r = scenario.render
     method, map_size = args.method or r.method, args.map_size or r.map_size
     if args.env is not None and args.maps:
@@ -325,12 +349,25 @@ def cmd_render(args: argparse.Namespace) -> int:
     settings = SessionSettings(method, args.key or r.key, args.white or r.white, log_average, every=args.every, overlay=overlay,
                                flip_every=r.flip_every)
     source = str(args.env) if args.env is not None else ", ".join(map(str, args.maps)) if args.maps else "captured"
-    with _output(args, _scenario_file(args.scenario), args.env, *(args.maps or ())) as work:
+    with _output(args, _scenario_file(args.scenario), args.env, args.recording, *(args.maps or ())) as work:
         metrics = render_session(scenario, work, settings, map_size, probe, maps, source, _bar, objects, recording)
     out = args.output
+    flip = (f"FLIP against the truth frame {metrics['flip_mean']:.4f}" if "flip_mean" in metrics
+            else "not scored (the true environment is unknown)")
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: {_tracking_p95(metrics)}; "
-          f"FLIP against the truth frame {metrics['flip_mean']:.4f}; metrics in {out / 'metrics.json'}")
+          f"{flip}; metrics in {out / 'metrics.json'}")
+    for why in metrics.get("truth", {}).values():
+        print(f"note: the truth is {why}")
     return 0
+
+
+def _check_recording(folder: Path) -> None:
+    """--recording: a recording (any layout) with its AR path, both loaded and checked before any output."""
+    from arsim.run.stages import recorded_pair
+
+    if not folder.exists():
+        raise ArsimError(f"{folder}: no such recording; make one with `arsim record SCENARIO -o REC`")
+    recorded_pair(folder)
 
 
 def _tile_policy(text: str) -> int | None:
@@ -538,6 +575,8 @@ def _parameters(args: argparse.Namespace) -> MapParameters:
 def _tracking_p95(m: dict) -> str:
     """The tracking's 95th percentiles in words; infinite where more than 5 % of the frames with the tag
     in view were lost (a lost frame counts as an infinite error)."""
+    if "tracking_rot_err_deg_p95" not in m:
+        return "tracking not measured (no ground truth)"
     rot, pct = m["tracking_rot_err_deg_p95"], m["tracking_trans_err_pct_p95"]
     if m["frames_tag_visible"] == 0:
         return "tracking p95 n/a (the tag was never wholly in view)"
@@ -663,8 +702,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise ArsimError("--update-baseline needs --baseline DIR: the folder to write the baseline into")
     if args.baseline is not None and not args.update_baseline:
         frames_of(args.baseline)  # a baseline without frames fails here, before any work
-    if args.recording is not None and not args.recording.is_dir():
-        raise ArsimError(f"{args.recording}: no such recording folder; make one with `arsim record SCENARIO -o REC`")
+    if args.recording is not None:
+        _check_recording(args.recording)
     source = str(args.scenario) if args.scenario is not None else "the embedded default scenario"
 
     result = None
@@ -675,7 +714,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = args.output
     s = manifest["metrics"]["session"]
     print(f"run {scenario.run.name} in {out}: {s['frames_total']} frames ({s['frames_lost']} with the tag lost), "
-          f"{_tracking_p95(s)}, FLIP against the truth frame {s['flip_mean']:.4f}; report {out / 'report' / 'index.html'}")
+          f"{_tracking_p95(s)}, " + (f"FLIP against the truth frame {s['flip_mean']:.4f}" if "flip_mean" in s else
+                                      "frames not scored (the true environment is unknown)")
+          + f"; report {out / 'report' / 'index.html'}")
+    for why in manifest["metrics"].get("truth", {}).values():
+        print(f"note: the truth is {why}")
     if args.update_baseline:
         print(f"baseline written: {update_baseline(out, args.baseline)}")
     elif result is not None:
@@ -944,6 +987,9 @@ def _render_parser(sub: argparse._SubParsersAction) -> None:
                  "frame with the truth frame (the objects lit by the true environment's maps) by FLIP",
                  "arsim render -o session   (or: arsim render scenarios/indoor.toml -o session --env probe.exr --method sh)")
     _session_options(p, "light the objects with this environment instead of the captured probe", recording=True)
+    p.add_argument("--recording", type=_path, metavar="REC",
+                   help="replay this recording (any layout, with or without a ground truth) with the scenario's objects "
+                        "instead of recording anew")
     p.add_argument("--maps", type=_path, nargs="+", metavar="DIR",
                    help="light the objects with maps baked before (`arsim bake` folders, one per method) instead of the captured probe")
     p.add_argument("--method", choices=sorted(METHODS),

@@ -22,9 +22,8 @@ from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.errors import ArsimError
 from arsim.core.png import read_frame
 from arsim.scenario import Scenario
-from arsim.scenario.loader import parse_scenario
 from arsim.sensors.camera import SensorSettings, vignette
-from arsim.sensors.frames import frame_camera_orientations, recording_camera
+from arsim.sensors.frames import frame_camera_orientations, recording_camera, recording_scenario  # (re-exported)
 from arsim.sensors.fusion import KP
 from arsim.sensors.recording import Recording
 
@@ -48,7 +47,7 @@ class CaptureResult:
     accumulator: ProbeAccumulator
     response: RecoveredResponse
     t_s: np.ndarray  # frame times (K,)
-    truth: Rotation  # true camera-to-world per frame
+    truth: Rotation | None  # true camera-to-world per frame; None: the recording has no ground truth
     uncorrected: Rotation  # what the IMU's fused orientation says
     corrected: Rotation  # what the probe was accumulated with: refined, or the online pass's without refinement
     online: Rotation  # the online pass's (aligned against the probe so far, frame by frame)
@@ -67,18 +66,10 @@ class CaptureResult:
         return len(self.t_s) / self.seconds
 
 
-def recording_scenario(rec: Recording) -> Scenario:
-    """The scenario a recording was made from (its meta.json keeps it)."""
-    if "scenario_toml" not in rec.meta:
-        raise ArsimError(f"{rec.folder}: the recording names no scenario (it was not made by arsim); this arsim "
-                         "captures recordings that keep their scenario")
-    return parse_scenario(rec.meta["scenario_toml"], str(rec.folder / "meta.json"), rec.folder)
-
-
 def burst_response(rec: Recording, sensor: SensorSettings) -> RecoveredResponse:
     if not rec.burst:
-        raise ArsimError(f"{rec.folder}: the recording has no response burst (burst.csv is empty); record it with "
-                         "[capture] burst_frames >= 2")
+        raise ArsimError(f"{rec.folder}: nothing to linearise its frames with: no response burst (burst.csv is empty) "
+                         "and no photometric calibration; record it with [capture] burst_frames >= 2 (a bracketed burst)")
     frames = [read_frame(rec.folder / b["file"]) for b in rec.burst]
     products = np.array([b["exposure_ns"] / 1e9 * b["iso"] / sensor.base_iso for b in rec.burst])
     return calibrate_response(frames, products)
@@ -198,7 +189,8 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     exposure_levels = sorted(set(bracket), reverse=True)  # the accumulator's levels, longest exposure first
     accumulator = new_accumulator(settings.size, camera, falloff, sensor, len(exposure_levels))
     aligner = Aligner(camera, falloff, response, scenario.run.seed)
-    uncorrected, truth = fused_camera_orientations(rec), frame_camera_orientations(rec)
+    uncorrected = fused_camera_orientations(rec)
+    truth = frame_camera_orientations(rec) if rec.groundtruth is not None else None
     _check_overlap(rec, uncorrected, camera)
     gyro_noise = GyroNoise.of(scenario.device.gyroscope)
     corrected, aligned = [], np.zeros(len(rec.frames), dtype=bool)

@@ -60,21 +60,21 @@ def _in_camera(estimate: dict, camera_to_world: np.ndarray) -> dict:
     return dict(estimate, main_light=light)
 
 
-def estimate_lines(frame_times_ns: np.ndarray, truth: np.ndarray, snapshots: list,
+def estimate_lines(frame_times_ns: np.ndarray, truth: np.ndarray | None, snapshots: list,
                    given: list[dict] | None = None, single: list[LightEstimate] | None = None,
                    camera_to_world: np.ndarray | None = None) -> list[dict]:
-    """One dict a frame: `frame`, `t_ns`, `truth`, `capture` (absent before the first snapshot), `frame`'s
+    """One dict a frame: `frame`, `t_ns`, `truth` (where the true environment is known: truth not None), `capture` (absent before the first snapshot), `frame`'s
     estimate from that frame alone (where given: single_frame.py) and `file` (where given: the user's line
     for that frame). camera_to_world (K, 3, 3): the phone's camera orientation per frame, which adds each
     main light's direction in the camera's frame (`direction_camera`)."""
-    truth_json = estimate_json(estimate_light(truth))
+    truth_json = estimate_json(estimate_light(truth)) if truth is not None else None
     times = np.array([t for t, _ in snapshots])
     estimates = [estimate_json(estimate_light(light)) for _, light in snapshots]
     start = frame_times_ns[0]
     by_frame = {line["frame"]: line for line in given or []}
     lines = []
     for k, t_ns in enumerate(frame_times_ns):
-        line = {"frame": k, "t_ns": int(t_ns), "truth": truth_json}
+        line = {"frame": k, "t_ns": int(t_ns)} | ({"truth": truth_json} if truth_json is not None else {})
         s = snapshot_index(times, (t_ns - start) * 1e-9) if len(times) else None
         if s is not None:
             line["capture"] = estimates[s]

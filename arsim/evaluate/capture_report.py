@@ -1,5 +1,7 @@
 """What a capture run is measured by, against the truth: metrics.json, the captured and true probes as
-EXR, and the coverage, drift and probe-versus-truth plots."""
+EXR, the coverage, drift and probe-versus-truth plots, and the orientations as TUM trajectory files. Where
+the recording lacks a truth (no groundtruth.csv, no scenario), what needs it is left out and metrics.json's
+"truth" says why."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from arsim.core.files import json_text, write_text_atomic
 from arsim.core.hdr_io import write_image
 from arsim.evaluate.metrics import map_error
 from arsim.evaluate.recording_plots import _pyplot, _save
+from arsim.evaluate.trajectories import TRAJECTORY_FILES, rotation_ape_rpe, rpe_delta_frames, write_tum
 from arsim.lighting.fast import fast_maps
 from arsim.sensors.camera import LUMA
 
@@ -37,35 +40,28 @@ def probe_map_errors(acc, truth: np.ndarray) -> tuple[list, np.ndarray]:
     return [map_error(maps_truth[k][inside], maps_probe[k][inside]) for k in range(len(MAP_EXPONENTS))], complete
 
 
-def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_error: dict) -> tuple[dict, np.ndarray]:
-    """metrics.json's content and the probe with its holes filled."""
+def capture_metrics(result: CaptureResult, truth: np.ndarray | None, true_response_error: dict | None,
+                    fps: float = 30.0, absent: dict | None = None) -> tuple[dict, np.ndarray]:
+    """metrics.json's content and the probe with its holes filled. What needs a truth the recording lacks is
+    left out: the orientation errors without result.truth (no groundtruth.csv), the probe's, maps' and
+    brightest source's without the true environment `truth`, the response's without its true error; `absent`
+    (sensors.frames.truth_absent) is written as "truth", saying why. fps: the camera's, for the RPE's step."""
     acc = result.accumulator
     n = acc.size
     inside = anglemap_disk_mask(n)
-    probe, covered = acc.probe(), acc.covered() & inside
-    measured = covered & ~acc.clipped_only()
-    eps = 1e-4 * truth[inside].mean()
-    rel = np.abs(probe[measured] - truth[measured]) / (truth[measured] + eps)
-    map_err, complete = probe_map_errors(acc, truth)
-    corrected = orientation_errors_deg(result.corrected, result.truth)
-    uncorrected = orientation_errors_deg(result.uncorrected, result.truth)
-    online = orientation_errors_deg(result.online, result.truth)
-    omega = anglemap_solid_angles(n)
-    luminance_truth, luminance_probe = truth @ LUMA, complete @ LUMA
-    core = (luminance_truth >= BRIGHTEST_FRACTION * luminance_truth[inside].max()).astype(np.uint8)
-    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * BRIGHTEST_MARGIN + 1, 2 * BRIGHTEST_MARGIN + 1))
-    brightest = inside & (cv2.dilate(core, disk) > 0)
-    ratio = float((luminance_probe[brightest] * omega[brightest]).sum() / (luminance_truth[brightest] * omega[brightest]).sum())
-    clipped = float((omega[brightest & acc.clipped_only()]).sum() / omega[brightest].sum())
-    metrics = {
-        "frames": len(result.t_s),
-        "frames_per_second": result.frames_per_second,
-        "coverage_pct": 100 * acc.coverage(),
-        "orientation_rms_deg_corrected": float(np.sqrt(np.mean(corrected**2))),
-        "orientation_max_deg_corrected": float(corrected.max()),
-        "orientation_rms_deg_uncorrected": float(np.sqrt(np.mean(uncorrected**2))),
-        "orientation_max_deg_uncorrected": float(uncorrected.max()),
-        "orientation_rms_deg_online": float(np.sqrt(np.mean(online**2))),
+    metrics = {"frames": len(result.t_s), "frames_per_second": result.frames_per_second, "coverage_pct": 100 * acc.coverage()}
+    if result.truth is not None:
+        corrected = orientation_errors_deg(result.corrected, result.truth)
+        uncorrected = orientation_errors_deg(result.uncorrected, result.truth)
+        online = orientation_errors_deg(result.online, result.truth)
+        metrics |= {
+            "orientation_rms_deg_corrected": float(np.sqrt(np.mean(corrected**2))),
+            "orientation_max_deg_corrected": float(corrected.max()),
+            "orientation_rms_deg_uncorrected": float(np.sqrt(np.mean(uncorrected**2))),
+            "orientation_max_deg_uncorrected": float(uncorrected.max()),
+            "orientation_rms_deg_online": float(np.sqrt(np.mean(online**2))),
+        }
+    metrics |= {
         "alignments_succeeded": int(result.aligned.sum()),
         "refined": result.refinement is not None,
         "keyframes": 0 if result.refinement is None else len(result.refinement.keyframes),
@@ -75,16 +71,53 @@ def capture_metrics(result: CaptureResult, truth: np.ndarray, true_response_erro
         "gyro_bias_sigma_dps_online": np.degrees(result.gyro_bias[1]).tolist(),
         "seconds_online": result.seconds_online,
         "seconds_refinement": result.seconds - result.seconds_online,
+    }
+    if truth is None:
+        complete = filled(acc.probe(), acc.covered() & inside)
+    else:
+        metrics_env, complete = _environment_metrics(acc, truth)
+        metrics |= {k: metrics_env[k] for k in ("radiance_median_abs_rel_err_pct", "radiance_mean_abs_rel_err_pct",
+                                                "irradiance_mean_err_pct", "reflection_s80_mean_err_pct")}
+    if true_response_error is not None:
+        metrics |= {"response_median_err_pct": true_response_error["median_pct"],
+                    "response_max_err_pct": true_response_error["max_pct"]}
+    if truth is not None:
+        metrics |= {k: metrics_env[k] for k in ("brightest_source_ratio", "brightest_source_clipped_pct")}
+    if result.truth is not None:
+        # The same errors as the SLAM community reports them (evo): APE and RPE of the rotation, degrees.
+        delta = rpe_delta_frames(fps, len(result.t_s))
+        for name, estimate in (("corrected", result.corrected), ("uncorrected", result.uncorrected)):
+            metrics |= {f"{k}_{name}": v for k, v in rotation_ape_rpe(result.t_s, result.truth, estimate, delta).items()}
+        metrics["rpe_delta_frames"] = delta
+    if absent:
+        metrics["truth"] = dict(absent)
+    return metrics, complete
+
+
+def _environment_metrics(acc, truth: np.ndarray) -> tuple[dict, np.ndarray]:
+    """The probe against the true environment: its radiance where measured, its maps, the brightest source."""
+    n = acc.size
+    inside = anglemap_disk_mask(n)
+    probe, covered = acc.probe(), acc.covered() & inside
+    measured = covered & ~acc.clipped_only()
+    eps = 1e-4 * truth[inside].mean()
+    rel = np.abs(probe[measured] - truth[measured]) / (truth[measured] + eps)
+    map_err, complete = probe_map_errors(acc, truth)
+    omega = anglemap_solid_angles(n)
+    luminance_truth, luminance_probe = truth @ LUMA, complete @ LUMA
+    core = (luminance_truth >= BRIGHTEST_FRACTION * luminance_truth[inside].max()).astype(np.uint8)
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * BRIGHTEST_MARGIN + 1, 2 * BRIGHTEST_MARGIN + 1))
+    brightest = inside & (cv2.dilate(core, disk) > 0)
+    ratio = float((luminance_probe[brightest] * omega[brightest]).sum() / (luminance_truth[brightest] * omega[brightest]).sum())
+    clipped = float((omega[brightest & acc.clipped_only()]).sum() / omega[brightest].sum())
+    return {
         "radiance_median_abs_rel_err_pct": float(100 * np.median(rel)),
         "radiance_mean_abs_rel_err_pct": float(100 * rel.mean()),
         "irradiance_mean_err_pct": map_err[0].mean_percent,
         "reflection_s80_mean_err_pct": map_err[1].mean_percent,
-        "response_median_err_pct": true_response_error["median_pct"],
-        "response_max_err_pct": true_response_error["max_pct"],
         "brightest_source_ratio": ratio,
         "brightest_source_clipped_pct": 100 * clipped,
-    }
-    return metrics, complete
+    }, complete
 
 
 def unmatched_warning(metrics: dict) -> str | None:
@@ -99,6 +132,8 @@ def unmatched_warning(metrics: dict) -> str | None:
 
 
 def brightest_warning(metrics: dict) -> str | None:
+    if "brightest_source_ratio" not in metrics:  # (no true environment to compare with)
+        return None
     ratio, clipped = metrics["brightest_source_ratio"], metrics["brightest_source_clipped_pct"]
     if 0.8 <= ratio <= 1.25:
         return None
@@ -111,6 +146,8 @@ def brightest_warning(metrics: dict) -> str | None:
 
 
 def plot_drift(result: CaptureResult, path: Path) -> Path:
+    if result.truth is None:
+        return plot_correction(result, path)
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(9, 3.5))
     ax.plot(result.t_s, orientation_errors_deg(result.uncorrected, result.truth), label="IMU only (uncorrected)")
@@ -128,6 +165,23 @@ def plot_drift(result: CaptureResult, path: Path) -> Path:
     return _save(fig, path)
 
 
+def plot_correction(result: CaptureResult, path: Path) -> Path:
+    """Without a ground truth: how far the capture turned the IMU's orientations (the drift it corrected, as far
+    as the alignment saw it)."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    if result.refinement is not None:
+        ax.plot(result.t_s, orientation_errors_deg(result.uncorrected, result.online), label="online alignment", alpha=0.7)
+    ax.plot(result.t_s, orientation_errors_deg(result.uncorrected, result.corrected), label="what the probe holds")
+    ax.scatter(result.t_s[result.aligned], np.zeros(result.aligned.sum()), s=2, color="tab:gray", label="online alignment succeeded")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("angle from the IMU's orientation (degrees)")
+    ax.set_title("The capture's correction of the IMU's orientation (the recording has no ground truth)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    return _save(fig, path)
+
+
 def plot_coverage_map(result: CaptureResult, path: Path) -> Path:
     plt = _pyplot()
     acc = result.accumulator
@@ -140,6 +194,18 @@ def plot_coverage_map(result: CaptureResult, path: Path) -> Path:
     ax.contour(acc.clipped_only(), levels=[0.5], colors="cyan", linewidths=0.7)
     fig.colorbar(image, ax=ax, label="log10 of the sum of weights (relative to the largest)")
     ax.set_title(f"Captured weight per texel; {100 * acc.coverage():.2f} % covered\n(cyan: only ever seen clipped)")
+    ax.axis("off")
+    return _save(fig, path)
+
+
+def plot_probe(probe: np.ndarray, path: Path) -> Path:
+    """The captured probe alone (where the true environment is unknown), exposed for its median luminance."""
+    plt = _pyplot()
+    inside = anglemap_disk_mask(probe.shape[0])
+    scale = 0.18 / max(float(np.median((probe @ LUMA)[inside])), 1e-12)
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    ax.imshow(np.clip((probe * scale) ** (1 / 2.2), 0, 1))
+    ax.set_title("captured (holes filled); no true environment to compare with")
     ax.axis("off")
     return _save(fig, path)
 
@@ -166,15 +232,25 @@ def plot_probe_vs_truth(probe: np.ndarray, truth: np.ndarray, path: Path) -> Pat
     return _save(fig, path)
 
 
-def write_capture(result: CaptureResult, truth: np.ndarray, response_error: dict, out_dir: Path) -> dict:
-    """Everything `arsim capture` writes into out_dir; returns the metrics."""
+def write_capture(result: CaptureResult, truth: np.ndarray | None, response_error: dict | None, out_dir: Path,
+                  fps: float = 30.0, absent: dict | None = None) -> dict:
+    """Everything `arsim capture` writes into out_dir; returns the metrics. truth: the true environment (None
+    where unknown: truth.exr is not written, probe.png shows the probe alone instead of probe_vs_truth.png);
+    the orientations as TUM trajectory files (trajectory_truth.tum only where the recording has a truth)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    metrics, complete = capture_metrics(result, truth, response_error)
+    metrics, complete = capture_metrics(result, truth, response_error, fps, absent)
     write_image(out_dir / "env.exr", result.accumulator.probe())
-    write_image(out_dir / "truth.exr", truth)
     plot_coverage_map(result, out_dir / "coverage.png")
     plot_drift(result, out_dir / "drift.png")
-    plot_probe_vs_truth(complete, truth, out_dir / "probe_vs_truth.png")
+    if truth is not None:
+        write_image(out_dir / "truth.exr", truth)
+        plot_probe_vs_truth(complete, truth, out_dir / "probe_vs_truth.png")
+    else:
+        plot_probe(complete, out_dir / "probe.png")
+    streams = {"capture": result.corrected, "fused": result.uncorrected, "truth": result.truth}
+    for name, rotations in streams.items():
+        if rotations is not None:
+            write_tum(out_dir / TRAJECTORY_FILES[name], result.t_s, rotations)
     warnings = [w for w in (brightest_warning(metrics), unmatched_warning(metrics)) if w]
     write_text_atomic(out_dir / "metrics.json", json_text(metrics | {"warnings": warnings}))
     return metrics | {"warnings": warnings}

@@ -76,22 +76,26 @@ def plot_scores(lines: list[dict], path) -> None:
     plt.close(fig)
 
 
-def sphere_figures(figures: dict, truth: np.ndarray, estimates: dict, given: dict | None, path) -> dict:
+def sphere_figures(figures: dict, truth: np.ndarray | None, estimates: dict, given: dict | None, path) -> dict:
     """The scores with each estimator's three spheres at the end of the sweep against the truth's
-    (spheres.py; the truth's own estimate among them: what the shapes allow): from its last estimate (LightEstimate: SH, main light and cubemap), and the file's diffuse
-    sphere from its SH and main light (a file gives no cubemap); spheres.png shows them, a row each, on the truth's exposure."""
+    (spheres.py; the truth's own estimate among them: what the shapes allow): from its last estimate (LightEstimate:
+    SH, main light and cubemap), and the file's diffuse sphere from its SH and main light (a file gives no cubemap);
+    spheres.png shows them, a row each, on the truth's exposure. Without the truth (None): the estimates' spheres
+    alone, on the first one's exposure, and no scores."""
     from arsim.evaluate.spheres import estimate_spheres, sphere_scores, truth_spheres
 
-    reference = truth_spheres(truth)
-    rows = {"truth": reference}
+    reference = truth_spheres(truth) if truth is not None else None
+    rows = {"truth": reference} if reference is not None else {}
     for name, e in estimates.items():
         row = "truth's estimate" if name == "truth" else name  # (the row "truth" is the true light itself)
         rows[row] = estimate_spheres(e.sh_radiance, e.main_light_direction, e.main_light_intensity, e.cubemap)
-        figures.setdefault(name, {})["spheres"] = sphere_scores(rows[row], reference)  # (the truth's: spheres only)
-    if given is not None and "file" in figures:
+        if reference is not None:
+            figures.setdefault(name, {})["spheres"] = sphere_scores(rows[row], reference)  # (the truth's: spheres only)
+    if given is not None and (reference is None or "file" in figures):
         light = given["main_light"]
         mine = estimate_spheres(np.asarray(given["sh_radiance"]), light["direction_world"], light["intensity_rgb"], None)
-        figures["file"]["spheres"] = {"diffuse": sphere_scores(mine, reference)["diffuse"]}
+        if reference is not None:
+            figures["file"]["spheres"] = {"diffuse": sphere_scores(mine, reference)["diffuse"]}
         rows["file (no cubemap)"] = mine
     _sphere_image(rows, path)
     return figures
@@ -104,9 +108,9 @@ def _sphere_image(rows: dict, path) -> None:
     from arsim.core.png import png_bytes
     from arsim.evaluate.inm_compare import srgb8
 
-    reference = rows["truth"]
-    exposures = [0.9 / max(float(np.percentile(reference[k][reference[k].max(axis=-1) > 0].max(axis=-1), 99)), 1e-12)
-                 for k in range(3)]
+    reference = next(iter(rows.values()))  # (the truth's, where known)
+    lit = [reference[k][reference[k].max(axis=-1) > 0].max(axis=-1) for k in range(3)]
+    exposures = [0.9 / max(float(np.percentile(v, 99)) if v.size else 0.0, 1e-12) for v in lit]
     lines = []
     for name, spheres in rows.items():
         tile = np.concatenate([srgb8(spheres[k], exposures[k]) for k in range(3)], axis=1)
@@ -145,7 +149,8 @@ CROP_HEIGHT = 180  # the crops' height in estimates/frames/*.png
 
 def write_estimate_frames(frames: dict, folder) -> list:
     """Per frame shown (render.session's estimate_frames): a PNG of the objects' region in the truth frame
-    and lit by each estimate, the FLIP error of each below it (magma, 0 to 1) with its mean over the objects;
+    and lit by each estimate, the FLIP error of each below it (magma, 0 to 1) with its mean over the objects
+    (without a truth frame: the objects' mask and the frames lit by each estimate, in one row);
     returns the paths written."""
     import cv2
 
@@ -168,12 +173,17 @@ def write_estimate_frames(frames: dict, folder) -> list:
             cv2.putText(t, label, (3, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
             return t
 
-        top, bottom = [tile(truth, "truth frame")], [tile(np.repeat(mask[..., None], 3, axis=-1).astype(np.uint8) * 255, "objects' mask")]
+        top = [tile(truth, "truth frame")] if truth is not None else []
+        bottom = [tile(np.repeat(mask[..., None], 3, axis=-1).astype(np.uint8) * 255, "objects' mask")]
         for name, image in shown["lit"].items():
-            error = flip_map(truth, image, mask)
             top.append(tile(image, f"{name}'s estimate"))
-            bottom.append(tile(magma(error), f"FLIP {float(error[mask].mean()):.4f}"))
+            if truth is not None:
+                error = flip_map(truth, image, mask)
+                bottom.append(tile(magma(error), f"FLIP {float(error[mask].mean()):.4f}"))
+        if truth is None:  # (no truth frame: the estimates' frames beside the objects' mask, nothing scored)
+            top, bottom = bottom + top, []
+        rows = [np.concatenate(r, axis=1) for r in (top, bottom) if r]
         path = folder / f"{k:06d}.png"
-        write_bytes_atomic(path, png_bytes(np.concatenate([np.concatenate(top, axis=1), np.concatenate(bottom, axis=1)], axis=0)))
+        write_bytes_atomic(path, png_bytes(np.concatenate(rows, axis=0)))
         written.append(path)
     return written

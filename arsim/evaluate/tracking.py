@@ -1,6 +1,6 @@
 """The tracker measured against the truth on an AR recording: per frame, the error of the camera's
 rotation (degrees) and position (millimetres, and percent of its distance to the tag), whether the tag
-was fully in view, and whether it was found."""
+was fully in view, and whether it was found (without a ground truth: only whether it was found)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from arsim.core.png import read_frame
 from arsim.core.tags import DEFAULT_DETECTOR
 from arsim.evaluate.capture_report import orientation_errors_deg
 from arsim.evaluate.recording_plots import tag_in_view
-from arsim.sensors.frames import frame_camera_orientations, frame_positions
+from arsim.sensors.frames import NO_GROUNDTRUTH, frame_camera_orientations, frame_positions
 from arsim.sensors.recording import Recording
 from arsim.tracking.apriltag import TagPose
 from arsim.tracking.fusion import recording_tracker
@@ -23,10 +23,16 @@ from arsim.tracking.fusion import recording_tracker
 @dataclass
 class TrackingRun:
     poses: list[TagPose]
-    visible: np.ndarray  # (K,) bool: all four corners of the tag inside the frame (true pose)
-    rot_err_deg: np.ndarray  # (K,) inf where the tag was not found
-    trans_err_mm: np.ndarray  # (K,) camera position error, inf where not found
-    trans_err_pct: np.ndarray  # (K,) the same in percent of the camera's true distance to the tag
+    # The four below are None where the recording has no ground truth (nothing to measure against).
+    visible: np.ndarray | None  # (K,) bool: all four corners of the tag inside the frame (true pose)
+    rot_err_deg: np.ndarray | None  # (K,) inf where the tag was not found
+    trans_err_mm: np.ndarray | None  # (K,) camera position error, inf where not found
+    trans_err_pct: np.ndarray | None  # (K,) the same in percent of the camera's true distance to the tag
+
+    @property
+    def measured(self) -> bool:
+        """Whether the poses were measured against a ground truth."""
+        return self.visible is not None
 
     @property
     def found(self) -> np.ndarray:
@@ -40,8 +46,16 @@ class TrackingRun:
     def metrics(self) -> dict:
         """Summary: the 95th percentiles over the frames where the tag was fully visible (a visible
         tag not found counts as an infinite error, so the percentile is infinite where more than 5 % of
-        them were lost: null in JSON), frame counts and the detection rate."""
-        visible, found = self.visible, self.found
+        them were lost: null in JSON), frame counts and the detection rate. Without a ground truth, only what
+        needs none: the frame counts, lost and extrapolated, and "truth" saying why the rest is absent."""
+        found = self.found
+        if not self.measured:
+            extrapolated = self.extrapolated
+            return {"frames_total": int(len(found)), "frames_lost": int((~found).sum()),
+                    "frames_extrapolated": int(extrapolated.sum()),
+                    "extrapolated_s_max": max((p.since_tag_s for p in self.poses if p.found and p.extrapolated), default=0.0),
+                    "truth": {"groundtruth": NO_GROUNDTRUTH}}
+        visible = self.visible
         # (the "higher" rule takes a frame's error: interpolating between two infinite errors gives NaN)
         p95 = (lambda a: float(np.percentile(a[visible], 95, method="higher")) if visible.any() else float("nan"))
         return {
@@ -68,6 +82,8 @@ def _p95(values: np.ndarray) -> float | None:
 def measure_poses(rec: Recording, poses: list[TagPose], frames: np.ndarray | None = None) -> TrackingRun:
     """Tracked poses of an AR recording's frames (all, or those at the indices `frames`) against the truth."""
     frames = np.arange(len(rec.frames)) if frames is None else np.asarray(frames)
+    if rec.groundtruth is None:
+        return TrackingRun(poses, None, None, None, None)
     views, positions = frame_camera_orientations(rec)[frames], frame_positions(rec)[frames]
     rot, mm, pct = [], [], []
     for k, pose in enumerate(poses):

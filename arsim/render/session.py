@@ -68,6 +68,7 @@ class SessionResult:
     # light estimate; and per estimator its score against the truth frame there.
     estimate_frames: dict = field(default_factory=dict)  # frame index -> {"truth_frame", "mask", "lit": {estimator: frame}}
     estimate_scores: dict = field(default_factory=dict)  # estimator -> {frame index: score}
+    scored: bool = True  # whether truth frames were rendered and scored (False: the true environment is unknown)
 
 
 def maps_needed(objects: Sequence[SceneObject], method: str) -> dict[str, list[float]]:
@@ -109,7 +110,7 @@ def _renderer(camera, maps: dict[str, MapSet], ctx, method: str, objects: list[S
     return renderer
 
 
-def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapSet], truth_maps: dict[str, MapSet],
+def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapSet], truth_maps: dict[str, MapSet] | None,
                 out_dir: Path,
                 objects: list[SceneObject], score: Scorer, settings: SessionSettings = SessionSettings(),
                 truth_objects: list[SceneObject] | None = None,
@@ -118,14 +119,16 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
     (a set per method: from the captured probe, or baked before) and truth frames lit by
     `truth_maps` (the same from the true environment), each frame scored against its truth frame by
-    `score`; writes frames/*.png and session.mp4 into out_dir. truth_objects: the objects as the truth
+    `score` (truth_maps None: the true environment is unknown, no truth frame is rendered and nothing is scored:
+    flip all NaN, estimate_frames without a truth frame); writes frames/*.png and session.mp4 into out_dir. truth_objects: the objects as the truth
     frames show them, where their directional light maps were baked from the true environment
     (light_objects); default: `objects`. estimates: per light estimator, its maps and objects (estimate.lit);
     at the saved frames the objects are also rendered lit by each, scored against the truth frame likewise."""
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code, settings)
     captured = _renderer(camera, maps, ctx, settings.method, objects)
-    true_light = _renderer(camera, truth_maps, ctx, settings.method, objects if truth_objects is None else truth_objects)
+    true_light = (None if truth_maps is None else  # (None: the true environment is unknown; nothing is scored)
+                  _renderer(camera, truth_maps, ctx, settings.method, objects if truth_objects is None else truth_objects))
     estimated = {name: _renderer(camera, m, ctx, settings.method, o) for name, (m, o) in (estimates or {}).items()}
     estimate_frames, estimate_scores = {}, {name: {} for name in estimated}
     indices = np.arange(0, len(rec.frames), settings.every)
@@ -155,7 +158,13 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
             out = captured.read_output()
             mask = captured.read_mask() > 0.5
             step_ms["readback"].append(1000 * (time.perf_counter() - start))
-            if pose.found and (n % settings.flip_every == 0 or k in saved):
+            if true_light is None and estimated and pose.found and k in saved and mask.any():
+                # no truth frame to score against: the objects lit by each estimate are still shown
+                if overlay_box is not None:
+                    mask[overlay_box] = False
+                lit = {name: _lit_frame(r, pose, time_s, frame, settings, overlay_box, out) for name, r in estimated.items()}
+                estimate_frames[int(k)] = {"truth_frame": None, "mask": mask, "lit": lit}
+            if true_light is not None and pose.found and (n % settings.flip_every == 0 or k in saved):
                 start = time.perf_counter()
                 # (the same overlay pixels on both, as FLIP's filters reach past its box, and those pixels left
                 # out of the mask: they are not the objects' light)
@@ -175,7 +184,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
             if n % 10 == 0 or n == count - 1:
                 progress((n + 1) / count)
         video.release()
-    return SessionResult(indices, poses, flips, step_ms, gl_ms, records, estimate_frames, estimate_scores)
+    return SessionResult(indices, poses, flips, step_ms, gl_ms, records, estimate_frames, estimate_scores,
+                         true_light is not None)
 
 
 def _lit_frame(renderer: Renderer, pose: TagPose, time_s: float, frame: np.ndarray, settings: SessionSettings,

@@ -10,7 +10,6 @@ shows it as a progress bar naming the stage.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import platform
 import time
@@ -90,9 +89,10 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, maps_needed, run_session
     from arsim.run.report import write_report
-    from arsim.run.stages import estimate_lights, estimated_sweep, measured_capture, session_probe, with_scenario
-    from arsim.scenario.environment import load_environment
-    from arsim.sensors.recording import load_recording, record, recording_segments
+    from arsim.run.stages import (estimate_lights, estimated_sweep, measured_capture, recorded_pair, session_probe, true_probe,
+                                  with_scenario)
+    from arsim.sensors.frames import truth_absent
+    from arsim.sensors.recording import record, recording_segments
 
     seconds: dict[str, float] = {}
 
@@ -117,12 +117,12 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         with step("recording", "1/6 recording the sweep and the AR path") as update:
             record(scenario, out / "recording", progress=lambda f: update(completed=f))
         recording = out / "recording"
-    elif not (recording / "ar").is_dir():
-        raise ArsimError(f"{recording}: no ar/ folder; replay a recording made with [ar] enabled = true (arsim record)")
-    sweep, ar = load_recording(recording), load_recording(recording / "ar")
+    sweep, ar = recorded_pair(recording)
     recorded = recording_scenario(sweep)  # the sensors as recorded, whatever the scenario given says
+    # What of the truth the recording lacks (a real recording: all of it); what needs it is left out, saying why.
+    absent = truth_absent(ar) | truth_absent(sweep)
 
-    # 2. The capture, measured against the truth.
+    # 2. The capture, measured against the truth (as far as the recording has one).
     result, capture_metrics = measured_capture(sweep, CaptureSettings.of(recorded), out / "capture",
                                                lambda description: step("capture", description),
                                                "2/6 capturing the light probe")
@@ -133,9 +133,9 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         estimates = estimated_sweep(sweep, out / "estimates", result=result)
 
     # 4. The maps of every method named, from the captured probe; each measured against the same method's
-    # maps of the true environment (what the capture costs) and the true environment's accurate maps.
+    # maps of the true environment (what the capture costs) and the true environment's accurate maps, where known.
     probe = session_probe(result, r.map_size)
-    truth = load_environment(dataclasses.replace(recorded.environment, probe_size=r.map_size))
+    truth = true_probe(sweep, r.map_size)
     needed = maps_needed(objects, r.method)
     exponents = sorted({s for ss in needed.values() for s in ss})
     methods = list(dict.fromkeys([*needed, *r.methods]))
@@ -146,13 +146,17 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         # accurate and bounds on the GL path: NumPy's float64 sums take half a minute at 128².
         gl = create_gl_context()
         gl_renderer = gl.info["GL_RENDERER"]  # (for the manifest: the context is released after the maps)
-        reference = bake(truth, exponents, "accurate", params, gl=gl).maps
+        reference = bake(truth, exponents, "accurate", params, gl=gl).maps if truth is not None else None
         for k, name in enumerate(methods):
             baked = bake(probe, exponents, name, params, gl=gl)
             (out / "maps" / name).mkdir(parents=True, exist_ok=True)
             write_bake(out / "maps" / name, exponents, name, params, baked, "capture/env.exr")
-            true_maps = reference if name == "accurate" else bake(truth, exponents, name, params, gl=gl).maps
             maps[name] = MapSet.of(name, exponents, baked.maps, "capture/env.exr")
+            update(completed=(k + 1) / len(methods))
+            if truth is None:  # (nothing to measure the maps against: metrics.json's "truth" says why)
+                map_metrics[name] = {"seconds": baked.seconds_total}
+                continue
+            true_maps = reference if name == "accurate" else bake(truth, exponents, name, params, gl=gl).maps
             truth_maps[name] = MapSet.of(name, exponents, true_maps, "truth")
             map_metrics[name] = {
                 "seconds": baked.seconds_total,
@@ -161,7 +165,6 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
                     "error_vs_truth_accurate_pct": map_error(reference[e][inside], baked.maps[e][inside]).mean_percent,
                     "method_error_on_truth_pct": map_error(reference[e][inside], true_maps[e][inside]).mean_percent,
                 } for e, s in enumerate(exponents)}}
-            update(completed=(k + 1) / len(methods))
         gl.release()
 
     # 5. The AR session over the AR path (the objects also lit by each light estimate at the frames shown),
@@ -169,8 +172,9 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     session_settings = with_scenario(SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay,
                                                      flip_every=r.flip_every), scenario, [light for _, light in result.snapshots])
     with step("session", "5/6 rendering the AR session") as update:
-        session = run_session(ar, result.response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe),
-                              masked_flip, session_settings, truth_objects=light_objects(objects, truth),
+        session = run_session(ar, result.response.linear[:, 1], maps, truth_maps if truth is not None else None, out,
+                              light_objects(objects, probe), masked_flip, session_settings,
+                              truth_objects=light_objects(objects, truth) if truth is not None else None,
                               progress=lambda f: update(completed=f),
                               estimates=estimate_lights(estimates.final, needed, objects, r.map_size))
     (out / "profile").mkdir(exist_ok=True)
@@ -180,7 +184,9 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     tracking, session_figures = session_metrics(ar, session)
     metrics = {"capture": {k: v for k, v in capture_metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
                "estimates": estimate_summary(estimates.figures, session.estimate_scores),
-               "maps": map_metrics, "session": session_figures}
+               "maps": map_metrics, "session": {k: v for k, v in session_figures.items() if k != "truth"}}
+    if absent:  # (every stage's figures that need it are left out)
+        metrics["truth"] = absent
     write_text_atomic(out / "metrics.json", json_text(metrics))
     with step("report", "6/6 writing the report") as update:
         write_estimate_frames(session.estimate_frames, out / "estimates" / "frames")

@@ -34,6 +34,7 @@ from arsim.render.session import SessionSettings, check_maps, maps_needed, run_p
 from arsim.scenario import Scenario
 from arsim.scenario.environment import load_environment
 from arsim.sensors.camera import ResponseCurve, SensorSettings
+from arsim.sensors.frames import true_environment, truth_absent
 from arsim.sensors.recording import Recording, RecordSummary, load_recording, record
 
 Stage = Callable[[str], contextlib.AbstractContextManager]
@@ -67,16 +68,24 @@ def recorded(scenario: Scenario, out: Path, stage: Stage = quiet_stage,
     return PlottedRecording(summary, plots["coverage"], tag)
 
 
+def true_probe(rec: Recording, size: int) -> np.ndarray | None:
+    """The true environment a recording saw as a size² angle map; None where it is unknown (no scenario in
+    its meta.json: sensors.frames.truth_absent)."""
+    section = true_environment(rec)
+    return None if section is None else load_environment(dataclasses.replace(section, probe_size=size))
+
+
 def measured_capture(rec: Recording, settings: CaptureSettings, out: Path, stage: Stage = quiet_stage,
                      description: str = "capturing") -> tuple[CaptureResult, dict]:
-    """The capture of a recording's sweep, measured against the truth, written into out (env.exr,
-    metrics.json, plots); returns the result and its metrics."""
+    """The capture of a recording's sweep, measured against the truth as far as the recording has one, written
+    into out (env.exr, metrics.json, plots, TUM trajectories); returns the result and its metrics."""
     scenario = recording_scenario(rec)  # the sensors as recorded
     with stage(description) as update:
         result = capture(rec, settings, progress=lambda f, c: update(
             completed=f, description=f"{description}: {100 * c:.1f} % covered"))
-    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=settings.size))
-    return result, write_capture(result, truth, response_error(result.response, true_response(scenario)), out)
+    truth = true_probe(rec, settings.size)
+    error = response_error(result.response, true_response(scenario)) if truth is not None else None
+    return result, write_capture(result, truth, error, out, rec.meta["camera"]["fps"], truth_absent(rec))
 
 
 def captured_sweep(scenario: Scenario, out: Path, size: int | None = None, align_every: int | None = None,
@@ -99,6 +108,7 @@ def recorded_sweep(scenario: Scenario, folder: Path, stage: Stage = quiet_stage)
 class SweepEstimates:
     figures: dict  # scores.json's content
     final: dict  # estimator -> its LightEstimate at the sweep's end (what the app carries into the AR session), truth's too
+    absent: str | None = None  # why there are no scores (figures empty): the true environment is unknown
 
 
 def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, stage: Stage = quiet_stage,
@@ -113,20 +123,19 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
     from arsim.estimate.shapes import estimate_light
     from arsim.evaluate.estimates import plot_scores, scores, sphere_figures
 
-    scenario = recording_scenario(rec)
     if result is None:
         with stage("capturing the sweep (the capture estimate's probe)") as update:
-            result = capture(rec, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
-    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=ESTIMATE_TRUTH_SIZE))
+            result = capture(rec, CaptureSettings.of(recording_scenario(rec)), progress=lambda f, c: update(completed=f))
+    truth = true_probe(rec, ESTIMATE_TRUTH_SIZE)  # (None: unknown; the estimates are made, not scored)
     with stage("estimating the light from each frame alone") as update:
         single = single_frame_estimates(rec, result.response, lambda f: update(completed=f))
     with stage("estimating the light"):
         views = fused_camera_orientations(rec).as_matrix()  # (the phone's camera frame: what its estimates are in)
         lines = estimate_lines(np.array([f["t_ns"] for f in rec.frames]), truth, result.snapshots, given, single, views)
         write_text_atomic(out / "estimates.jsonl", "".join(json_text(line, indent=None) for line in lines))
-        figures = scores(lines)
-        # the truth's own estimate: what a perfect estimator reports, the shapes' own limit
-        final = {"truth": estimate_light(truth)}
+        figures = scores(lines) if truth is not None else {}
+        # the truth's own estimate, where the truth is known: what a perfect estimator reports, the shapes' own limit
+        final = {"truth": estimate_light(truth)} if truth is not None else {}
         if result.snapshots:
             final["capture"] = estimate_light(result.snapshots[-1][1])
         final["single"] = single[-1]
@@ -135,11 +144,14 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
         for name, e in final.items():  # the sweep's last frame, per platform
             for platform, shape in PLATFORMS.items():
                 write_text_atomic(out / "platforms" / f"{name}_{platform}.json", json_text(shape(e)))
-        write_text_atomic(out / "scores.json", json_text(figures))
-        plot_scores(lines, out / "scores.png")
+        if truth is not None:
+            write_text_atomic(out / "scores.json", json_text(figures))
+            plot_scores(lines, out / "scores.png")
+        else:  # (scores.json says why it holds none)
+            write_text_atomic(out / "scores.json", json_text({"truth": truth_absent(rec)["scenario"]}))
     if given:
         final["file"] = line_estimate(given[-1])
-    return SweepEstimates(figures, final)
+    return SweepEstimates(figures, final, None if truth is not None else truth_absent(rec)["scenario"])
 
 
 def estimate_lights(final: dict, needed: dict[str, list[float]], objects: list, map_size: int) -> dict:
@@ -190,21 +202,23 @@ def session_probe(result: CaptureResult, map_size: int) -> np.ndarray:
 def session_inputs(scenario: Scenario, out: Path, probe: np.ndarray | None, map_size: int, capture_probe: bool = True,
                    stage: Stage = quiet_stage, recording: tuple[Recording, Recording] | None = None):
     """What an AR session needs: the scenario recorded into out/recording (or the sweep and AR path of
-    `recording`, made before), its AR part, the light probe
-    (`probe` where given, else captured from the sweep; None when not wanted) as a map_size angle map, and
-    the camera's response (from the capture, or from the sweep's burst), and the probe as it grew (the
-    capture's snapshots; empty where none was captured)."""
+    `recording`, made before, in any layout: recorded_pair), its AR part, the light probe (`probe` where given,
+    else captured from the sweep; None when not wanted) as a map_size angle map, the camera's response (from
+    the capture, or from the sweep's calibration or burst), the probe as it grew (the capture's snapshots;
+    empty where none was captured), and the sweep's recording."""
     if recording is None:
         with stage("recording the sweep and the AR path") as update:
             record(scenario, out / "recording", progress=lambda f: update(completed=f))
         sweep, ar = load_recording(out / "recording"), load_recording(out / "recording" / "ar")
+        recorded = scenario
     else:
         sweep, ar = recording
+        recorded = recording_scenario(sweep)  # the sensors as recorded (its own, or the default's where it names none)
     if probe is None and capture_probe:
         with stage("capturing the light probe") as update:
-            result = capture(sweep, CaptureSettings.of(scenario), progress=lambda f, c: update(completed=f))
-        return ar, session_probe(result, map_size), result.response, [light for _, light in result.snapshots]
-    return ar, probe, recording_response(sweep, SensorSettings.of(scenario.device.camera)), []
+            result = capture(sweep, CaptureSettings.of(recorded), progress=lambda f, c: update(completed=f))
+        return ar, session_probe(result, map_size), result.response, [light for _, light in result.snapshots], sweep
+    return ar, probe, recording_response(sweep, SensorSettings.of(recorded.device.camera)), [], sweep
 
 
 def with_scenario(settings: SessionSettings, scenario: Scenario, snapshots: list) -> SessionSettings:
@@ -222,24 +236,27 @@ def with_scenario(settings: SessionSettings, scenario: Scenario, snapshots: list
 def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map_size: int, probe: np.ndarray | None = None,
                    maps: dict | None = None, source: str = "captured", stage: Stage = quiet_stage,
                    objects: list | None = None, recording: tuple[Recording, Recording] | None = None) -> dict:
-    """The AR session of a scenario into out: recorded (or `recording`'s sweep and AR path, made before), the
-    probe captured (or `probe`), the objects
-    (scene_objects of the scenario, unless given) lit by maps from it (or by `maps` baked before), each
-    frame scored against its truth frame; metrics.json written; returns the metrics."""
+    """The AR session of a scenario into out: recorded (or `recording`'s sweep and AR path, made before,
+    replayed), the probe captured (or `probe`), the objects (scene_objects of the scenario, unless given) lit
+    by maps from it (or by `maps` baked before), each frame scored against its truth frame where the true
+    environment is known; metrics.json written; returns the metrics."""
     objects = scene_objects(scenario.render, scenario.ar.table_albedo) if objects is None else objects
     needed = maps_needed(objects, settings.method)
     if maps is not None:
         check_maps(maps, needed)
-    ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None, stage=stage,
-                                                  recording=recording)
+    ar, probe, response, growing, sweep = session_inputs(scenario, out, probe, map_size, capture_probe=maps is None,
+                                                         stage=stage, recording=recording)
+    # the true environment: the scenario's, or a replayed recording's own (None where it does not know it)
+    truth = (load_environment(dataclasses.replace(scenario.environment, probe_size=map_size)) if recording is None
+             else true_probe(sweep, map_size))
     settings = with_scenario(settings, scenario, growing)
-    truth = load_environment(dataclasses.replace(scenario.environment, probe_size=map_size))
     with stage(f"computing the maps ({', '.join(needed)})"):
         maps = maps if maps is not None else session_maps(probe, needed, source)
-        truth_maps = session_maps(truth, needed, "truth")
+        truth_maps = session_maps(truth, needed, "truth") if truth is not None else None
     with stage(f"rendering the AR session ({', '.join(needed)} maps)") as update:
         session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), masked_flip,
-                              settings, truth_objects=light_objects(objects, truth), progress=lambda f: update(completed=f))
+                              settings, truth_objects=light_objects(objects, truth) if truth is not None else None,
+                              progress=lambda f: update(completed=f))
     metrics = session_metrics(ar, session)[1] | {"method": settings.method, "methods": needed, "map_size": map_size,
                                                  "log_average": settings.log_average, "probe": source}
     write_text_atomic(out / "metrics.json", json_text(metrics))
@@ -294,7 +311,7 @@ def profile_session(scenario: Scenario, out: Path, bakes: Sequence[BakeSettings]
         b.check(map_size)  # a tile that does not divide the maps fails here, before any work
     r = scenario.render
     objects = scene_objects(r, scenario.ar.table_albedo) if objects is None else objects
-    ar, probe, response, growing = session_inputs(scenario, out, probe, map_size, stage=stage)
+    ar, probe, response, growing, _ = session_inputs(scenario, out, probe, map_size, stage=stage)
     settings = with_scenario(SessionSettings("mipmap", r.key, r.white, r.log_average, overlay=True), scenario, growing)
     runs, poses = [], {}
     for b in bakes:

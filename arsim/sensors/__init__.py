@@ -5,6 +5,6 @@ from arsim.core.public import lazy_names
 
 __all__, __getattr__ = lazy_names(__name__, {
     "recording": ("record", "load_recording", "Recording"),
-    "frames": ("recording_camera", "frame_camera_orientations", "frame_positions"),
+    "frames": ("recording_camera", "frame_camera_orientations", "frame_positions", "recording_scenario", "truth_absent"),
     "imu": ("simulate_imu",),
 })

@@ -8,7 +8,8 @@ A recording folder holds:
                      burst.csv: exposure_ns, iso, file
   imu.csv            t_ns, sensor, x, y, z   (gyroscope rad/s, accelerometer m/s², magnetometer µT)
   orientation.csv    t_ns, qx, qy, qz, qw    (the fused device-to-world orientation the app reads)
-  groundtruth.csv    t_ns, px, py, pz, qx, qy, qz, qw  (true device pose at every gyroscope sample)
+  groundtruth.csv    t_ns, px, py, pz, qx, qy, qz, qw  (true device pose at every gyroscope sample; optional:
+                     a real recording has none, and what is measured against it is left out)
   ar/                the AR path ([ar] enabled): a recording of its own in the same layout (no burst),
                      its meta.json adding the table, the tag and its world corners
 """
@@ -322,14 +323,15 @@ class Recording:
     burst: list[dict]  # exposure_ns, iso, file
     imu: dict[str, SensorStream]
     orientation: tuple[np.ndarray, Rotation]
-    groundtruth: tuple[np.ndarray, np.ndarray, Rotation]
+    groundtruth: tuple[np.ndarray, np.ndarray, Rotation] | None  # None: no groundtruth.csv (a real recording)
     # a camera's photometric calibration where the recording carries one (TUM-VI's): the capture uses it
     # instead of calibrating the response from the burst (README: Recordings in standard layouts)
     photometric: Photometric | None = None
 
 
 # meta.json as a recording declares it (README: Recording format): key -> (type, what it must hold);
-# a type of None means any JSON value. "table" only in an AR path's recording.
+# a type of None means any JSON value. "table" only in an AR path's recording; the keys in META_OPTIONAL may be
+# left out (a recording arsim did not synthesise: sensors.frames.recording_scenario says what stands in for them).
 _NUMBER = (int, float)
 META_SCHEMA = {
     "format": (str, lambda v: v == FORMAT, f"{FORMAT}"),
@@ -340,6 +342,7 @@ META_SCHEMA = {
     "fusion": (str, lambda v: True, "the fusion's name"),
     "scenario_toml": (str, lambda v: True, "the scenario as TOML text"),
 }
+META_OPTIONAL = frozenset({"scenario_toml"})
 _CAMERA = {"width": (1, 1 << 15), "height": (1, 1 << 15), "fx": (1e-3, 1e6), "fy": (1e-3, 1e6), "cx": (-1e6, 1e6),
            "cy": (-1e6, 1e6), "k1": (-1.0, 1.0), "k2": (-1.0, 1.0), "fps": (1e-3, 1e4)}
 
@@ -372,6 +375,8 @@ def check_meta(meta, path: Path) -> None:
         raise ArsimError(f"{path}: format {meta.get('format')!r} is not known; this arsim reads {FORMAT}")
     for key, (kind, ok, what) in META_SCHEMA.items():
         if key not in meta:
+            if key in META_OPTIONAL:
+                continue
             raise ArsimError(f"{path}: lacks {key!r} ({what}); record again")
         v = meta[key]
         if isinstance(v, bool) or not isinstance(v, kind) or not ok(v):
@@ -517,7 +522,9 @@ def load_recording(folder: Path) -> Recording:
     _increasing(path, values[:, 0].astype(np.int64), "orientations")
     orientation = (values[:, 0].astype(np.int64), _rotations(path, values[:, 1:], "orientations"))
     path = folder / "groundtruth.csv"
-    values = _numbers(path, _read_csv(path, ["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"]), slice(0, 8))
-    _increasing(path, values[:, 0].astype(np.int64), "ground-truth poses")
-    groundtruth = (values[:, 0].astype(np.int64), values[:, 1:4], _rotations(path, values[:, 4:], "ground-truth poses"))
+    groundtruth = None  # (a real recording has none: what needs it is left out, saying so)
+    if path.exists():
+        values = _numbers(path, _read_csv(path, ["t_ns", "px", "py", "pz", "qx", "qy", "qz", "qw"]), slice(0, 8))
+        _increasing(path, values[:, 0].astype(np.int64), "ground-truth poses")
+        groundtruth = (values[:, 0].astype(np.int64), values[:, 1:4], _rotations(path, values[:, 4:], "ground-truth poses"))
     return Recording(folder, meta, frames, burst, imu, orientation, groundtruth)

@@ -266,8 +266,7 @@ class FusedTracker:
 def recording_tracker(rec, linear_of_code, detector: str, fusion: bool):
     """The tracker of an AR recording's tag (its table's family, id and size, its camera): a TagTracker with
     the detector, fused with the recording's IMU (its scenario's datasheet figures) where fusion is set."""
-    from arsim.scenario.loader import parse_scenario
-    from arsim.sensors.frames import recording_camera
+    from arsim.sensors.frames import recording_camera, recording_scenario
     from arsim.tracking.apriltag import TagTracker
     from arsim.tracking.detectors import CORNER_SIGMA_PX
 
@@ -276,7 +275,7 @@ def recording_tracker(rec, linear_of_code, detector: str, fusion: bool):
                          detector)
     if not fusion:
         return tracker
-    device = parse_scenario(rec.meta["scenario_toml"], str(rec.folder / "meta.json"), rec.folder).device
+    device = recording_scenario(rec).device
     times = np.array([f["t_ns"] for f in rec.frames], dtype=np.int64)
     return FusedTracker(tracker, times, rec.imu, rec.meta["camera_to_device"],
                         ImuNoise.of(device.gyroscope, device.accelerometer), CORNER_SIGMA_PX[detector])
