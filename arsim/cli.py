@@ -456,10 +456,14 @@ def cmd_export(args: argparse.Namespace) -> int:
     if recording:
         given = [name for name, value in (("--env", args.env), ("--size", args.size)) if value is not None]
         if given:
-            raise ArsimError(f"{' and '.join(given)} apply to maps and probes, not to a recording; leave them out")
+            raise ArsimError(f"{' and '.join(given)}: for maps and probes only, not a recording; leave "
+                             f"{'it' if len(given) == 1 else 'them'} out")
         if len(recording) > 1:
             raise ArsimError(f"--format {','.join(args.format)}: a recording is written in one layout at a time; give one")
         return _export_recording(args)
+    if args.input.is_dir() and detect_format(args.input) is not None:
+        raise ArsimError(f"{args.input} is a recording, which is written in a layout: --format one of "
+                         f"{', '.join(RECORDING_FORMATS)} (maps for engines come from a bake or a probe)")
     return _export_maps(args)
 
 
