@@ -58,7 +58,7 @@ def ggx(chain, roughness, metallic, base=BASE):
                                                           (0.77, 0.5, False), (1.0, 0.0, True)])
 def test_gl_ggx_equals_the_numpy_reference(gl, light, roughness, metallic, impostor):
     """Every pixel within the HDR target's precision (RGBA16F: 2^-10 of a value, llvmpipe's conversion
-    truncating): measured at 160 x 120, mean relative error 3.5e-4, max 1.5e-3 (roughness 0, where level 0's
+    truncating): measured at 160 x 120, mean relative error 3.5e-4, max 1.1e-3 (roughness 0, where level 0's
     sharp texels meet), silhouette included. Fractional levels (0.77 x 5 = 3.85) are trilinear as GL's."""
     env, maps, chain = light
     hdr, mask, n, v = render(gl, maps, ggx(chain, roughness, metallic), impostor)
@@ -108,7 +108,7 @@ def test_a_rough_dielectric_is_lambertian_plus_a_small_fresnel_term(gl, light):
     excess = (hdr - diffuse).mean(axis=1) / diffuse.mean(axis=1)
     n_dot_v = -np.sum(normalize(n) * normalize(v), axis=1)
     facing, grazing = n_dot_v > 0.8, n_dot_v < 0.2
-    assert (excess > -2e-3).all()  # (the HDR target's truncation)
+    assert (excess > 0.0).all()
     assert 0.0 < np.median(excess[facing]) < 0.1
     assert np.median(excess[grazing]) > 1.5 * np.median(excess[facing])
 
@@ -167,3 +167,11 @@ def test_a_ggx_material_without_its_cube_map_is_refused(gl, light):
     env, maps, chain = light
     with pytest.raises(ArsimError, match="light the objects with content.light_objects"):
         Renderer(CAMERA, maps, gl).add(SceneObject(uv_sphere(0.1), ggx(None, 0.5, 0.0), np.eye(4), sphere=0.1))
+
+
+def test_ggx_objects_without_a_probe_are_refused():
+    from arsim.core.errors import ArsimError
+
+    objects = scene_objects(parse_scenario('[[render.objects]]\nkind = "sphere"\nmaterial = "ggx"\n').render)
+    with pytest.raises(ArsimError, match="give the probe"):
+        light_objects(objects, None)

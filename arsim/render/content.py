@@ -387,6 +387,9 @@ def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneOb
     holds every object wherever it goes. GGX materials (material = ggx) get the light's prefiltered cube map
     (ggx_chain)."""
     if any(o.material.model == "ggx" for o in objects):
+        if light is None:
+            raise ArsimError('material = "ggx" objects are lit by the probe\'s GGX prefiltered cube map, computed from the '
+                             'probe: give the probe (--env PROBE.exr, or let the capture make it) rather than maps baked before')
         chain = ggx_chain(light)
         objects = [dataclasses.replace(o, material=dataclasses.replace(o.material, ggx_chain=chain))
                    if o.material.model == "ggx" else o for o in objects]
