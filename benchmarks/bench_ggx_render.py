@@ -3,7 +3,8 @@ default scenario's AR path, once with the thesis's Phong materials and once as G
 the same run: a row of ten ray-cast spheres and the normal-mapped torus with its AO light map. Step 5
 (the objects) per frame: GL time (timer query) and CPU time around glFinish, median and p95 over the
 frames where the tag is in view (the two materials interleaved frame by frame), and the best of 20 draws
-at the path's nearest view (CPU time around glFinish: the steadiest figure on a shared machine); and the one-time costs, the probe's GGX chain and the split sum's table.
+at the path's nearest view (CPU time around glFinish: the steadiest figure on a shared machine); and the
+one-time costs, the probe's GGX chain and the split sum's table.
 
     python benchmarks/bench_ggx_render.py [--frames N] [--width W --height H]
 """
