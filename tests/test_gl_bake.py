@@ -58,6 +58,14 @@ def test_more_maps_than_attachments_bake_in_several_passes(gl, env):
     assert max_relative(gl_accurate_maps(env, exponents, ctx=gl), reference) < 1e-3
 
 
+@pytest.mark.parametrize("exponents", [[1], [1, 2, 5, 10, 20, 40, 80, 160, 320]])
+def test_a_pass_of_one_map_bakes(gl, env, exponents):
+    """The irradiance map alone (what GGX objects read), and nine maps (a second pass of one): a pass's
+    array of one exponent is set as one."""
+    reference = accurate_maps(env, exponents)
+    assert max_relative(gl_accurate_maps(env, exponents, ctx=gl), reference) < 1e-3
+
+
 @pytest.mark.parametrize("order", [8, 35])
 def test_gl_sh_maps_equal_the_direct_sh_sum_tiled_and_untiled(gl, env, order):
     """Alg. 4.7 on the GL path against sh.py's direct float64 sum of the same coefficients. SH maps ring

@@ -76,6 +76,10 @@ def test_the_wheel_holds_the_bundled_data(tmp_path):
     for path in bundled:
         assert path.relative_to(package.parent).as_posix() in inside, path
     assert "arsim/scenario/default.toml" in inside and any(n.startswith("arsim/render/shaders/") for n in inside)
+    shaders = [p for p in package.rglob("shaders/*") if p.is_file() and p.suffix != ".pyc"]
+    assert len(shaders) >= 10
+    for path in shaders:  # (every kind: a compute shader left out of package-data would fail only when installed)
+        assert path.relative_to(package.parent).as_posix() in inside, path
 
 
 def test_bundled_scenarios_by_name(tmp_path):

@@ -147,7 +147,7 @@ class GLAccurateBaker(GLBaker):
         self.sums = [self.ctx.texture((self.n, self.n), 4, dtype="f4") for _ in self.exponents]
         self.resolvers = []
         for group, program, _, _ in self.passes:
-            program["exponents"].value = [self.exponents[k] for k in group]
+            program["exponents"].write(np.array([self.exponents[k] for k in group], dtype="f4").tobytes())  # (a one-map pass: a float, not a list)
             program["Spans"].binding = 0
             if "threshold" in program:
                 program["threshold"].value = bounds_threshold
@@ -156,7 +156,7 @@ class GLAccurateBaker(GLBaker):
             header = f"#version 430\n#define MAPS {len(group)}\n"
             resolver = self.ctx.program(vertex_shader="#version 430\n" + _shader("bake_tile.vert"),
                                         fragment_shader=header + _shader("bake_resolve.frag"))
-            resolver["sums"].value = list(range(len(group)))
+            resolver["sums"].write(np.arange(len(group), dtype="i4").tobytes())  # (as bytes: an array of one takes no list)
             self.resolvers.append((resolver, self.ctx.vertex_array(resolver, []), sums_fbo))
         self.resources += [self.probe, self.radiance, *self.sums]
 

@@ -264,6 +264,13 @@ def scene_objects(section, table_albedo: tuple[float, float, float] = TABLE_ALBE
         else:
             objects.append(_torus_object(o, x, z, lighting))
         for k in range(added, len(objects)):
+            if o.material == "ggx":
+                # (a row: roughness 0 to 1 along it, as the Phong row's exponents; exponent 1: only the irradiance map is read)
+                roughness = k - added if o.kind == "sphere_row" else None
+                roughness = o.roughness if roughness is None else roughness / (len(SPHERE_EXPONENTS) - 1)
+                material = dataclasses.replace(objects[k].material, model="ggx", base_color=tuple(o.base_color),
+                                               metallic=o.metallic, roughness=float(roughness), exponent=1.0)
+                objects[k] = dataclasses.replace(objects[k], material=material)
             if lighting.kind == "volume":
                 material = dataclasses.replace(objects[k].material, volume_lit=True, light_map=None)
                 objects[k] = dataclasses.replace(objects[k], material=material)
@@ -350,12 +357,42 @@ def scene_occlusion(objects: list[SceneObject], lit_by_volume: list[bool]) -> Oc
     return Occlusion(blocked, distance, occluders, key)
 
 
+GGX_CUBE_SIZE = 128  # faces of the GGX prefiltered cube map's level 0 (the mirror): 6 levels, 128 to 4 texels
+_GGX_CHAINS: dict[str, list[np.ndarray]] = {}  # the chains computed this process, by the light's content
+
+
+def ggx_chain(light: np.ndarray, size: int = GGX_CUBE_SIZE) -> list[np.ndarray]:
+    """The GGX prefiltered cube map (levels (6, size >> p, size >> p, 3), lighting.ggx.prefilter_ggx) of an
+    angle-map light (world frame): computed once per light (a second call with the same content returns the
+    same list, so that a renderer uploads it once)."""
+    import hashlib
+
+    from arsim.core.resample import to_cube
+    from arsim.lighting.ggx import prefilter_ggx
+
+    data = np.ascontiguousarray(light, dtype=np.float32)
+    key = hashlib.sha1(data.tobytes() + repr((data.shape, size)).encode()).hexdigest()
+    if key not in _GGX_CHAINS:
+        if len(_GGX_CHAINS) >= 8:  # (a session holds a few lights: the probe, the truth, the estimates)
+            _GGX_CHAINS.pop(next(iter(_GGX_CHAINS)))
+        _GGX_CHAINS[key] = prefilter_ggx(to_cube(data, size).astype(np.float64))
+    return _GGX_CHAINS[key]
+
+
 def light_objects(objects: list[SceneObject], light: np.ndarray) -> list[SceneObject]:
     """The objects with their directional light maps (lighting = inm-...), their PRT transfer (lighting =
     prt-..., relit from this light) and the scene's irradiance volume (lighting = volume) baked from an
     angle-map light (world frame): visibility against the table top and every object that stands still and
     is not lit by the volume (those move, or may), by its distance function or its mesh; the volume's box
-    holds every object wherever it goes."""
+    holds every object wherever it goes. GGX materials (material = ggx) get the light's prefiltered cube map
+    (ggx_chain)."""
+    if any(o.material.model == "ggx" for o in objects):
+        if light is None:
+            raise ArsimError('material = "ggx" objects are lit by the probe\'s GGX prefiltered cube map, computed from the '
+                             'probe: give the probe (--env PROBE.exr, or let the capture make it) rather than maps baked before')
+        chain = ggx_chain(light)
+        objects = [dataclasses.replace(o, material=dataclasses.replace(o.material, ggx_chain=chain))
+                   if o.material.model == "ggx" else o for o in objects]
     inm = [o.material.basis and o.lightmap_surface is not None for o in objects]
     lit_by_volume = [o.material.volume_lit for o in objects]
     if not any(inm) and not any(lit_by_volume) and all(o.transfer is None for o in objects):

@@ -81,6 +81,16 @@ class Material:
     prt_matrices: np.ndarray | None = None
     prt_compressed: object = None
     prt_light: np.ndarray | None = None  # the light's SH (order^2, 3) it is relit with when added (None: zeros)
+    # Metallic-roughness (README: GGX materials): model "ggx" takes base_color, metallic and roughness
+    # instead of kd, ks and the exponent: diffuse (1 - metallic) base_color times what the diffuse part
+    # gives (the irradiance map, a light map, a volume...), specular the GGX prefiltered radiance of the light
+    # (ggx_chain: the cube map's levels, lighting.ggx.prefilter_ggx, set by content.light_objects) times the
+    # split sum F0 A + B (lighting.ggx.brdf_lut).
+    model: str = "phong"
+    base_color: tuple[float, float, float] = (0.8, 0.8, 0.8)
+    metallic: float = 0.0
+    roughness: float = 0.5
+    ggx_chain: list | None = None
 
 
 def box_corners(low: np.ndarray, high: np.ndarray) -> np.ndarray:
@@ -242,6 +252,8 @@ class Renderer:
         self._rgba = np.empty((camera.height, camera.width, 4), np.uint8)
         self.output_fbo = self.ctx.framebuffer([self.output])
         self.tonemappers = {}
+        self._ggx_cache = {}  # GGX materials' prefiltered cube maps (per chain) and the split sum's table
+        self._cube_writer = None
         self.overlay_program = None
         self.overlay_box = None  # the overlay's pixels (a slice of the image) after overlay_pass
 
@@ -293,20 +305,73 @@ class Renderer:
         if m.prt_variant:
             prt_target, prt_textures = self._prt_targets(obj)
             textures.update(prt_textures)
+        if m.model == "ggx":
+            textures.update(self._ggx_textures(m))
         if terms:
             program["inm_terms"].value = terms
         # What does not change from frame to frame, set once: each object has its own program.
-        program["kd"].value, program["ks"].value = tuple(m.kd), tuple(m.ks)
+        if m.model == "ggx":
+            base, metallic = np.asarray(m.base_color, dtype=np.float64), float(m.metallic)
+            program["kd"].value = tuple((1.0 - metallic) * base)
+            program["f0"].value = tuple(0.04 * (1.0 - metallic) + base * metallic)  # GLSL's mix(0.04, base, metallic)
+            program["roughness"].value = float(m.roughness)
+            program["ggx_levels"].value = float(len(m.ggx_chain))
+        else:
+            program["kd"].value, program["ks"].value = tuple(m.kd), tuple(m.ks)
         units = self._bind_units(program, method, m, textures)
         texel_world = {name: scale * texel_length(obj.mesh, obj.mesh.uvs if name == "normal_map" else obj.mesh.uvs2,
                                                   max(tex.size[:2])) for name, tex in textures.items()
-                       if tex is not None and name != "sep_basis"}  # (a table over normals, no mip level)
+                       if tex is not None and name not in ("sep_basis", "ggx_map", "brdf_lut")}  # (tables over directions: no mip level)
         corners = np.hstack([obj.corners(), np.ones((8, 1))])
         prt = (m, prt_target) if m.prt_variant else None
         self.objects.append(_Drawable(program, vaos, errors, units, corners, texel_world, sphere, obj.orbit, obj.model.copy(), prt))
         if prt is not None and m.prt_light is not None:
             self._relight(self.objects[-1], m.prt_light)
         self.corners = np.stack([d.corners for d in self.objects])
+
+    def _ggx_textures(self, m: Material) -> dict:
+        """A GGX material's prefiltered cube map (one texture per chain, shared by the objects lit by it) and
+        the split sum's table (one per renderer)."""
+        from arsim.lighting.ggx import brdf_lut
+
+        chain = m.ggx_chain
+        if chain is None or len(chain) < 2 or any(np.shape(a) != (6, chain[0].shape[1] >> p, chain[0].shape[1] >> p, 3)
+                                                   for p, a in enumerate(chain)):
+            raise ArsimError("a ggx material needs its prefiltered cube map, levels (6, N >> p, N >> p, 3); "
+                             "light the objects with content.light_objects")
+        cache = self._ggx_cache
+        if id(chain) not in cache:
+            cache[id(chain)] = (chain, self._cube_chain_texture(chain))  # (the chain kept: its id stays its own)
+        if "lut" not in cache:
+            lut = np.ascontiguousarray(brdf_lut().astype(np.float32))  # row 0: roughness near 0 (GL's t = 0)
+            texture = self.ctx.texture(lut.shape[:2][::-1], 2, lut.tobytes(), dtype="f4")
+            texture.repeat_x = texture.repeat_y = False
+            cache["lut"] = texture
+        return {"ggx_map": cache[id(chain)][1], "brdf_lut": cache["lut"]}
+
+    def _cube_chain_texture(self, chain: list):
+        """A float RGBA cube map texture whose mip levels are the chain's (OpenGL's face order and orientation,
+        core.conventions.CUBE_FACES): level 0 uploaded, the chain's levels written over the generated ones by a
+        compute shader (moderngl writes a cube map's faces at level 0 only)."""
+        def rgba(level):
+            return np.ascontiguousarray(np.concatenate([level, np.ones(level.shape[:3] + (1,))], axis=-1).astype(np.float32))
+
+        size = chain[0].shape[1]
+        texture = self.ctx.texture_cube((size, size), 4, rgba(chain[0]).tobytes(), dtype="f4")
+        texture.build_mipmaps(0, len(chain) - 1)
+        texture.filter = self.ctx.LINEAR_MIPMAP_LINEAR, self.ctx.LINEAR
+        if self._cube_writer is None:
+            self._cube_writer = self.ctx.compute_shader(_shader("cube_level.comp"))
+        for p in range(1, len(chain)):
+            n = size >> p
+            buffer = self.ctx.buffer(rgba(chain[p]).tobytes())
+            buffer.bind_to_storage_buffer(0)
+            texture.bind_to_image(0, read=False, write=True, level=p)
+            self._cube_writer["size"].value = n
+            self._cube_writer.run((n + 7) // 8, (n + 7) // 8, 6)
+            self.ctx.memory_barrier()
+            buffer.release()
+        return texture
 
     def _check_maps(self, method: str, exponent: float) -> None:
         """ArsimError naming what is held where the method has no irradiance map or none for the exponent."""
@@ -343,6 +408,7 @@ class Renderer:
                 raise ArsimError(f"an irradiance volume holds (X, Y, Z, 9, 3) coefficients on at least 2 points per axis, "
                                  f"not {volume.shape}")
             defines.append("VOLUME")
+        defines += ["GGX"] if m.model == "ggx" else []
         defines += ["DEBUG"] if self.debug else []
         defines += ["FLOAT_FILTERING"] if "llvmpipe" in self.ctx.info["GL_RENDERER"] else []
         return defines, terms

@@ -45,6 +45,95 @@ def shade(normal: np.ndarray, incident: np.ndarray, irradiance: np.ndarray, refl
     return np.asarray(kd) * diffuse + np.asarray(ks) * specular
 
 
+def cube_texel_seamless(level: np.ndarray, face: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+    """Texels (K, C) of a cube level (6, N, N, C) at integer (face, row, col) that may lie one texel past the
+    face's edge, as GL's seamless cube maps read them: past an edge, the adjacent face's texel there (the
+    one the direction through the texel's centre, on the face's plane extended, falls in); past a corner,
+    the mean of the three texels that meet there."""
+    from arsim.core.conventions import CUBE_FACES, cube_texels
+
+    n = level.shape[1]
+    inside_r, inside_c = (row >= 0) & (row < n), (col >= 0) & (col < n)
+    table = np.array(CUBE_FACES, dtype=np.float64)
+
+    def across(r, c):  # the texel the extended texel's centre direction falls in
+        s, t = (c + 0.5) / n * 2 - 1, (r + 0.5) / n * 2 - 1
+        d = table[face, 0] + s[:, None] * table[face, 1] + t[:, None] * table[face, 2]
+        f, rr, cc = cube_texels(normalize(d), n)
+        return level[f, rr, cc]
+
+    rc, cc = np.clip(row, 0, n - 1), np.clip(col, 0, n - 1)
+    out = level[face, rc, cc].astype(np.float64)
+    edge_c, edge_r = inside_r & ~inside_c, ~inside_r & inside_c
+    out[edge_c | edge_r] = across(row, col)[edge_c | edge_r]
+    corner = ~inside_r & ~inside_c
+    if corner.any():
+        out[corner] = (level[face, rc, cc] + across(rc, col) + across(row, cc))[corner] / 3.0
+    return out
+
+
+def sample_cube_seamless(level: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Bilinear values (K, C) of a cube level (6, N, N, C) in unit directions (K, 3), across the faces' edges
+    as GL's seamless cube-map filtering (cube_texel_seamless)."""
+    from arsim.core.conventions import cube_face_st
+
+    n = level.shape[1]
+    face, s, t = cube_face_st(directions)
+    x, y = (s + 1.0) * 0.5 * n - 0.5, (t + 1.0) * 0.5 * n - 0.5
+    c0, r0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - c0)[:, None], (y - r0)[:, None]
+    texel = lambda dr, dc: cube_texel_seamless(level, face, r0 + dr, c0 + dc)  # noqa: E731
+    return (1 - fy) * ((1 - fx) * texel(0, 0) + fx * texel(0, 1)) + fy * ((1 - fx) * texel(1, 0) + fx * texel(1, 1))
+
+
+def sample_cube_chain(chain, directions: np.ndarray, lod: np.ndarray) -> np.ndarray:
+    """textureLod on a cube map with mip levels (LINEAR_MIPMAP_LINEAR, seamless): bilinear in the two levels
+    around each lod (K,), clamped to the chain, and linear between them."""
+    lod = np.clip(np.asarray(lod, dtype=np.float64), 0.0, len(chain) - 1)
+    lower = np.minimum(np.floor(lod).astype(int), len(chain) - 1)
+    frac = (lod - lower)[:, None]
+    out = np.zeros((len(directions), chain[0].shape[-1]))
+    for p in np.unique(lower):
+        sel = lower == p
+        value = (1.0 - frac[sel]) * sample_cube_seamless(chain[p], directions[sel])
+        if p + 1 < len(chain):
+            value += frac[sel] * sample_cube_seamless(chain[p + 1], directions[sel])
+        out[sel] = value
+    return out
+
+
+def sample_lut(lut: np.ndarray, n_dot_v: np.ndarray, roughness: np.ndarray) -> np.ndarray:
+    """(K, 2) the split sum's (A, B) from the table (S, S, 2) (lighting.ggx.brdf_lut: n.v across, roughness
+    down) at (n.v, roughness), bilinear between texel centres and clamped to the edge texels, as GL."""
+    size_r, size_c = lut.shape[:2]
+    x = np.clip(np.asarray(n_dot_v, dtype=np.float64) * size_c - 0.5, 0.0, size_c - 1.0)
+    y = np.clip(np.asarray(roughness, dtype=np.float64) * size_r - 0.5, 0.0, size_r - 1.0)
+    c0, r0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    c1, r1 = np.minimum(c0 + 1, size_c - 1), np.minimum(r0 + 1, size_r - 1)
+    fx, fy = (x - c0)[:, None], (y - r0)[:, None]
+    return (1 - fy) * ((1 - fx) * lut[r0, c0] + fx * lut[r0, c1]) + fy * ((1 - fx) * lut[r1, c0] + fx * lut[r1, c1])
+
+
+def shade_ggx(normal: np.ndarray, incident: np.ndarray, irradiance: np.ndarray, chain, lut: np.ndarray,
+              base_color, metallic: float, roughness: float, light: np.ndarray | None = None) -> np.ndarray:
+    """A GGX metallic-roughness material lit with the split sum, on (K, 3) normals and incident vectors:
+    L_o = (1 - metallic) base_color M_1(n) [x light] + P(reflect(v, n), roughness) (F0 A + B), with M_1 the
+    irradiance angle map (E / pi), P the prefiltered cube chain (lighting.ggx.prefilter_ggx) read at level
+    roughness (levels - 1), F0 = mix(0.04, base_color, metallic) and (A, B) the table (lighting.ggx.brdf_lut)
+    at (n.v, roughness)."""
+    n, v = normalize(normal), normalize(incident)
+    diffuse = sample_anglemap(irradiance, n)
+    if light is not None:
+        diffuse = diffuse * light
+    base = np.asarray(base_color, dtype=np.float64)
+    n_dot_v = np.clip(-np.sum(n * v, axis=-1), 0.0, 1.0)
+    rough = np.full(len(n), float(roughness))
+    split = sample_lut(lut, n_dot_v, rough)
+    prefiltered = sample_cube_chain(chain, reflect(v, n), rough * (len(chain) - 1))
+    f0 = 0.04 * (1.0 - metallic) + base * metallic
+    return (1.0 - metallic) * base * diffuse + prefiltered * (f0 * split[:, :1] + split[:, 1:])
+
+
 def inm_diffuse(coefficients: np.ndarray, basis: str, normal_tangent: np.ndarray, terms: int | None = None) -> np.ndarray:
     """Irradiance normal mapping's diffuse term, E / pi (what an irradiance map holds): the basis (e.g.
     "modh6") at the tangent-space normals (..., 3) weighted by the light map's coefficients there

@@ -220,6 +220,16 @@ class RenderObjectSection:
     exponent: float = setting(80.0, min=1.0, max=100000.0, help="Phong exponent: the reflection map used (not for a row)")
     method: str = setting("", choices=("",) + MAP_METHODS,
                           help="map method of this object's maps (default \"\": [render] method)")
+    material: str = setting("phong", choices=("phong", "ggx"),
+                            help="phong (the thesis: kd, ks, exponent) or ggx (metallic-roughness: base_color, metallic, "
+                                 "roughness, the specular part from the probe's GGX prefiltered cube map and the split-sum "
+                                 "BRDF table; a sphere_row: roughness 0 to 1 along the row)")
+    base_color: tuple[float, float, float] = setting((0.8, 0.8, 0.8), min=0.0, max=1.0,
+                                                     help="material = ggx: base colour (RGB, linear): the diffuse albedo of a "
+                                                          "dielectric, the specular colour F0 of a metal")
+    metallic: float = setting(0.0, min=0.0, max=1.0, help="material = ggx: 0 a dielectric (F0 = 0.04), 1 a metal (F0 = base_color)")
+    roughness: float = setting(0.5, min=0.0, max=1.0,
+                               help="material = ggx: perceptual roughness (alpha = roughness^2; not for a row)")
     normal_map: bool = setting(True, help="torus, and a mesh with texture coordinates: the tangent-space ridges normal map")
     light_map: bool = setting(True, help="torus: its baked ambient-occlusion light map (lighting = lightmap-ao)")
     lighting: str = setting("lightmap-ao",

@@ -34,6 +34,13 @@ uniform int inm_terms;              // the spec's level of detail: the leading t
 #ifdef PRT_VERTEX
 in vec3 v_prt[BASIS_COUNT];         // precomputed radiance transfer relit per vertex (object.vert)
 #endif
+#ifdef GGX
+uniform samplerCube ggx_map;        // the light's GGX prefiltered radiance, level p at roughness p / (levels - 1)
+uniform sampler2D brdf_lut;         // the split sum's (A, B): n.v across (s), perceptual roughness up (t)
+uniform vec3 f0;                    // mix(0.04, base_color, metallic)
+uniform float roughness;            // perceptual
+uniform float ggx_levels;
+#endif
 #ifdef SPHERE_IMPOSTOR
 uniform vec3 center;                // world
 uniform float radius;
@@ -149,8 +156,16 @@ void main() {
     // Alg. 5.4 line 9 uses the unperturbed n_w here, a typo for n (see render/shading.py).
     vec3 diffuse = lookup(irradiance_map, n) * light;
 #endif
+#ifdef GGX
+    // Metallic-roughness with the split sum (Karis 2013): kd holds (1 - metallic) base_color.
+    float n_dot_v = clamp(-dot(n, v), 0.0, 1.0);
+    vec2 split = textureLod(brdf_lut, vec2(n_dot_v, roughness), 0.0).rg;
+    vec3 prefiltered = textureLod(ggx_map, reflect(v, n), roughness * (ggx_levels - 1.0)).rgb;
+    hdr = vec4(kd * diffuse + prefiltered * (f0 * split.x + split.y), 1.0);
+#else
     vec3 specular = lookup(reflection_map, reflect(v, n));
     hdr = vec4(kd * diffuse + ks * specular, 1.0);
+#endif
     mask = vec4(1.0, log(LOG_DELTA + dot(hdr.rgb, vec3(0.299, 0.587, 0.114))), 0.0, 0.0);
 #ifdef DEBUG
 #if defined(VOLUME)
