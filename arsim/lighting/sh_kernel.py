@@ -160,3 +160,33 @@ def bilinear_lookup(texels, index, weight):  # pragma: no cover (compiled)
             for ch in range(channels):
                 out[k, ch] += w * texels[row, ch]
     return out
+
+
+@numba.njit(parallel=True, cache=True)
+def lookup_into(out, texel_index, grid, index, weight, den):  # pragma: no cover (compiled)
+    """out.flat[texel_index[k], c] = (sum over the four corners of weight[k, j] grid[c, index[k, j]]) / den[k]
+    (0 where den[k] <= 0): the bilinear lookup of a (C, P) grid, its normalisation and the scatter into the
+    (N*N, C) map, in one pass."""
+    channels = grid.shape[0]
+    for k in numba.prange(index.shape[0]):
+        d = den[k]
+        for ch in range(channels):
+            v = 0.0
+            for j in range(4):
+                v += weight[k, j] * grid[ch, index[k, j]]
+            out[texel_index[k], ch] = v / d if d > 0 else 0.0
+
+
+@numba.njit(parallel=True, cache=True)
+def lookup_channels(grid, index, weight):  # pragma: no cover (compiled)
+    """(K, C): sum over the four corners j of weight[k, j] grid[c, index[k, j]], grid being (C, P) (each
+    channel's plane as ducc0 writes it, no transpose)."""
+    channels = grid.shape[0]
+    out = np.empty((index.shape[0], channels))
+    for k in numba.prange(index.shape[0]):
+        for ch in range(channels):
+            v = 0.0
+            for j in range(4):
+                v += weight[k, j] * grid[ch, index[k, j]]
+            out[k, ch] = v
+    return out
