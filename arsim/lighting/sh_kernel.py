@@ -190,3 +190,48 @@ def lookup_channels(grid, index, weight):  # pragma: no cover (compiled)
                 v += weight[k, j] * grid[ch, index[k, j]]
             out[k, ch] = v
     return out
+
+
+@numba.njit(inline="always")
+def _catmull_rom(t, w):  # pragma: no cover (compiled)
+    t2 = t * t
+    t3 = t2 * t
+    w[0] = 0.5 * (-t3 + 2.0 * t2 - t)
+    w[1] = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0)
+    w[2] = 0.5 * (-3.0 * t3 + 4.0 * t2 + t)
+    w[3] = 0.5 * (t3 - t2)
+
+
+@numba.njit(parallel=True, cache=True)
+def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den):  # pragma: no cover (compiled)
+    """out[texel_index[k], c] = the Catmull-Rom (bicubic) value of the (C, n_theta * n_phi) grid at fractional
+    (rows[k], cols[k]), divided by den[k] (0 where den[k] <= 0). Rows past a pole continue on the far side
+    of it (row -r is row r half a turn round), columns wrap."""
+    channels = grid.shape[0]
+    half = n_phi // 2
+    for k in numba.prange(rows.size):
+        r0 = int(math.floor(rows[k]))
+        c0 = int(math.floor(cols[k]))
+        wr = np.empty(4)
+        wc = np.empty(4)
+        _catmull_rom(rows[k] - r0, wr)
+        _catmull_rom(cols[k] - c0, wc)
+        acc = np.zeros(channels)
+        for i in range(4):
+            r = r0 - 1 + i
+            shift = 0
+            if r < 0:
+                r = -r
+                shift = half
+            elif r > n_theta - 1:
+                r = 2 * (n_theta - 1) - r
+                shift = half
+            for j in range(4):
+                c = (c0 - 1 + j + shift) % n_phi
+                w = wr[i] * wc[j]
+                base = r * n_phi + c
+                for ch in range(channels):
+                    acc[ch] += w * grid[ch, base]
+        d = den[k]
+        for ch in range(channels):
+            out[texel_index[k], ch] = acc[ch] / d if d > 0 else 0.0

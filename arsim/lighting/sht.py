@@ -27,14 +27,14 @@ import numpy as np
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.lighting.phong import phong_zonal_coefficients
-from arsim.lighting.sh_kernel import bilinear_lookup, lookup_into
+from arsim.lighting.sh_kernel import cubic_lookup_into
 
 _SHT = ducc0.sht.experimental
 EPSILON = 1e-10  # the NUFFTs' relative accuracy for `sh` (its maps must match the exact texel sums)
 FAST_EPSILON = 1e-7  # for `sht`: far below its truncation, and cheaper
 TRUNCATION = 1e-4  # sht: drop bands whose zonal coefficient is below this
 MIN_BANDS = 48  # the clamped cosine of s = 1 decays only like l^-2.5
-GRID_SAMPLES_PER_BAND = 8
+GRID_SAMPLES_PER_BAND = 4
 
 
 def threads() -> int:
@@ -150,7 +150,10 @@ def _weight_map(n: int, exponent: float, bands: int) -> np.ndarray:
     alm = zonal_scale(texel_sums_alm(np.ones((n, n, 1)), bands - 1, FAST_EPSILON), phong_zonal_coefficients(exponent, bands))
     size = grid_size(bands)
     grid = synthesise_cc_grid(alm, bands - 1, *size)
-    values = bilinear_lookup(np.ascontiguousarray(grid.reshape(1, -1).T), *grid_sampler(n, *size))[:, 0]
+    values = np.zeros((n * n, 1))
+    cubic_lookup_into(values, np.arange(len(disk_locations(n))), grid.reshape(1, -1), *size, *grid_coordinates(n, *size),
+                      np.ones(len(disk_locations(n))))
+    values = values[: len(disk_locations(n)), 0].copy()
     values.setflags(write=False)
     return values
 
@@ -183,25 +186,20 @@ def _disk_mask(n: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=32)
-def grid_sampler(n: int, n_theta: int, n_phi: int) -> tuple[np.ndarray, np.ndarray]:
-    """Bilinear corner indices and weights (K, 4) of every disk texel of an N x N angle map on the
-    Clenshaw-Curtis grid (n_theta, n_phi) (kept: every bake at that size reuses them)."""
+def grid_coordinates(n: int, n_theta: int, n_phi: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fractional (row, column) of every disk texel of an N x N angle map on the Clenshaw-Curtis grid
+    (n_theta, n_phi) (kept: every bake at that size reuses them)."""
     loc = disk_locations(n)
-    r = np.clip(loc[:, 0] / np.pi * (n_theta - 1), 0, n_theta - 1)
-    c = loc[:, 1] / (2 * np.pi) * n_phi
-    r0 = np.minimum(r.astype(np.int64), n_theta - 2)
-    c0 = np.floor(c).astype(np.int64)
-    fr, fc = r - r0, c - c0
-    c0 %= n_phi
-    c1 = (c0 + 1) % n_phi  # longitude wraps
-    index = np.stack([r0 * n_phi + c0, r0 * n_phi + c1, (r0 + 1) * n_phi + c0, (r0 + 1) * n_phi + c1], axis=1)
-    weight = np.stack([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc], axis=1)
-    return index, weight
+    rows = loc[:, 0] / np.pi * (n_theta - 1)
+    cols = loc[:, 1] / (2 * np.pi) * n_phi
+    for a in (rows, cols):
+        a.setflags(write=False)
+    return rows, cols
 
 
 def grid_size(bands: int) -> tuple[int, int]:
     """(n_theta, n_phi) of the grid an exponent's map is synthesised on: GRID_SAMPLES_PER_BAND samples
-    per band in theta, so that the bilinear lookup's error stays far below the truncation's."""
+    per band in theta, so that the bicubic lookup's error stays far below the truncation's."""
     n_theta = GRID_SAMPLES_PER_BAND * bands + 1
     return n_theta, 2 * (n_theta - 1)
 
@@ -218,7 +216,8 @@ def sht_map(env: np.ndarray, prepared: tuple[np.ndarray, int], exponent: float) 
     size = grid_size(bands)
     grid = synthesise_cc_grid(zonal_scale(alm[:, keep], kappa), bands - 1, *size)
     out = np.zeros((n * n, 3), dtype=np.float32)
-    lookup_into(out, _disk_index(n), grid.reshape(3, -1), *grid_sampler(n, *size), _weight_map(n, float(exponent), bands))
+    cubic_lookup_into(out, _disk_index(n), grid.reshape(3, -1), *size, *grid_coordinates(n, *size),
+                      _weight_map(n, float(exponent), bands))
     return out.reshape(n, n, 3)
 
 
