@@ -10,6 +10,7 @@ from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.evaluate.metrics import map_error
 from arsim.lighting.accurate import accurate_maps
+from arsim.lighting.mc import mc_maps
 from arsim.lighting.methods import MapParameters, bake
 from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh import (GRID_MAX_ORDER, MAX_ORDER, WINDOWS, _disk_sampler, sh_coefficients, sh_evaluate, sh_maps,
@@ -125,3 +126,12 @@ def test_windows_reduce_ringing_around_a_bright_source(bright64):
     assert plain < 0
     for window in ("hann", "sloan"):
         assert sh_maps(bright64, [1280], 12, window=window)[0][..., 0].min() > 0.5 * plain
+
+
+@pytest.mark.parametrize("filtered", [True, False])
+def test_mc_compiled_equals_its_numpy_path(bright64, filtered):
+    """mc's compiled samples: the same uniforms, directions, levels and lookups as the NumPy path."""
+    env = bright64[::2, ::2].copy()
+    fast = mc_maps(env, [1, 20, 1280], 16, seed=3, filtered=filtered)
+    slow = mc_maps(env, [1, 20, 1280], 16, seed=3, filtered=filtered, compiled=False)
+    np.testing.assert_allclose(fast, slow, rtol=1e-5, atol=1e-6 * slow.max())
