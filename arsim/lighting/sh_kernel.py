@@ -193,18 +193,16 @@ def lookup_channels(grid, index, weight):  # pragma: no cover (compiled)
 
 
 @numba.njit(inline="always")
-def _catmull_rom(t, w):  # pragma: no cover (compiled)
+def _catmull_rom(t):  # pragma: no cover (compiled)
     t2 = t * t
     t3 = t2 * t
-    w[0] = 0.5 * (-t3 + 2.0 * t2 - t)
-    w[1] = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0)
-    w[2] = 0.5 * (-3.0 * t3 + 4.0 * t2 + t)
-    w[3] = 0.5 * (t3 - t2)
+    return (0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0), 0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+            0.5 * (t3 - t2))
 
 
 @numba.njit(parallel=True, cache=True)
 def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den):  # pragma: no cover (compiled)
-    """out[texel_index[k], c] = the Catmull-Rom (bicubic) value of the (C, n_theta * n_phi) grid at fractional
+    """out[texel_index[k], c] = the Catmull-Rom (bicubic) value of the (C <= 3, n_theta * n_phi) grid at fractional
     (rows[k], cols[k]), divided by den[k] (0 where den[k] <= 0). Rows past a pole continue on the far side
     of it (row -r is row r half a turn round), columns wrap."""
     channels = grid.shape[0]
@@ -212,11 +210,12 @@ def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den): 
     for k in numba.prange(rows.size):
         r0 = int(math.floor(rows[k]))
         c0 = int(math.floor(cols[k]))
-        wr = np.empty(4)
-        wc = np.empty(4)
-        _catmull_rom(rows[k] - r0, wr)
-        _catmull_rom(cols[k] - c0, wc)
-        acc = np.zeros(channels)
+        wr = _catmull_rom(rows[k] - r0)
+        wc = _catmull_rom(cols[k] - c0)
+        # Three accumulators (the channels this is used with: 1 or 3; a single channel is read thrice).
+        c1 = min(1, channels - 1)
+        c2 = min(2, channels - 1)
+        a0 = a1 = a2 = 0.0
         for i in range(4):
             r = r0 - 1 + i
             shift = 0
@@ -227,11 +226,73 @@ def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den): 
                 r = 2 * (n_theta - 1) - r
                 shift = half
             for j in range(4):
-                c = (c0 - 1 + j + shift) % n_phi
+                q = r * n_phi + (c0 - 1 + j + shift) % n_phi
                 w = wr[i] * wc[j]
-                base = r * n_phi + c
-                for ch in range(channels):
-                    acc[ch] += w * grid[ch, base]
+                a0 += w * grid[0, q]
+                a1 += w * grid[c1, q]
+                a2 += w * grid[c2, q]
+        d = den[k]
+        t = texel_index[k]
+        out[t, 0] = a0 / d if d > 0 else 0.0
+        if channels > 1:
+            out[t, 1] = a1 / d if d > 0 else 0.0
+        if channels > 2:
+            out[t, 2] = a2 / d if d > 0 else 0.0
+
+
+@numba.njit(parallel=True, cache=True)
+def lookup_channels(grid, index, weight):  # pragma: no cover (compiled)
+    """(K, C): sum over the four corners j of weight[k, j] grid[c, index[k, j]], grid being (C, P) (each
+    channel's plane as ducc0 writes it, no transpose)."""
+    channels = grid.shape[0]
+    out = np.empty((index.shape[0], channels))
+    for k in numba.prange(index.shape[0]):
+        for ch in range(channels):
+            v = 0.0
+            for j in range(4):
+                v += weight[k, j] * grid[ch, index[k, j]]
+            out[k, ch] = v
+    return out
+
+
+@numba.njit(inline="always")
+def _catmull_rom(t):  # pragma: no cover (compiled)
+    t2 = t * t
+    t3 = t2 * t
+    return (0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0), 0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+            0.5 * (t3 - t2))
+
+
+@numba.njit(parallel=True, cache=True)
+def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den):  # pragma: no cover (compiled)
+    """out[texel_index[k], c] = the Catmull-Rom (bicubic) value of the (C <= 3, n_theta * n_phi) grid at fractional
+    (rows[k], cols[k]), divided by den[k] (0 where den[k] <= 0). Rows past a pole continue on the far side
+    of it (row -r is row r half a turn round), columns wrap."""
+    channels = grid.shape[0]
+    half = n_phi // 2
+    for k in numba.prange(rows.size):
+        r0 = int(math.floor(rows[k]))
+        c0 = int(math.floor(cols[k]))
+        wr = _catmull_rom(rows[k] - r0)
+        wc = _catmull_rom(cols[k] - c0)
+        # The 16 taps' flat indices and weights, then every channel from them.
+        idx = np.empty(16, dtype=np.int64)
+        wgt = np.empty(16)
+        for i in range(4):
+            r = r0 - 1 + i
+            shift = 0
+            if r < 0:
+                r = -r
+                shift = half
+            elif r > n_theta - 1:
+                r = 2 * (n_theta - 1) - r
+                shift = half
+            for j in range(4):
+                idx[4 * i + j] = r * n_phi + (c0 - 1 + j + shift) % n_phi
+                wgt[4 * i + j] = wr[i] * wc[j]
         d = den[k]
         for ch in range(channels):
-            out[texel_index[k], ch] = acc[ch] / d if d > 0 else 0.0
+            v = 0.0
+            for q in range(16):
+                v += wgt[q] * grid[ch, idx[q]]
+            out[texel_index[k], ch] = v / d if d > 0 else 0.0
