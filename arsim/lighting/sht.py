@@ -32,7 +32,7 @@ from arsim.lighting.sh_kernel import cubic_lookup_into
 
 _SHT = ducc0.sht.experimental
 EPSILON = 1e-10  # the NUFFTs' relative accuracy for `sh` (its maps must match the exact texel sums)
-FAST_EPSILON = 1e-7  # for `sht`: far below its truncation, and cheaper
+FAST_EPSILON = 2e-6  # for `sht`, in single precision: far below its truncation, and about twice as fast
 TRUNCATION = 1e-6  # sht: drop bands whose zonal coefficient is below this (1e-4 left 30 % near a bright texel)
 GRID_TRUNCATION = 1e-4  # the bands the grid resolves with GRID_SAMPLES_PER_BAND samples
 MAX_BANDS_SEARCH = 1024
@@ -101,14 +101,16 @@ def alm_from_real(coeffs: np.ndarray, order: int) -> np.ndarray:
 def zonal_scale(alm: np.ndarray, factors: np.ndarray) -> np.ndarray:
     """alm (C, nalm) times a factor per band l (factors of length lmax+1)."""
     l, _, _ = _alm_index(factors.size - 1)
-    return alm * factors[l]
+    return alm * factors[l].astype(alm.real.dtype)
 
 
 def texel_sums_alm(env: np.ndarray, lmax: int, epsilon: float = EPSILON) -> np.ndarray:
-    """ducc0 alm (C, nalm) of sum_i L_i conj(Y_lm(w_i)) W_i over the disk texels of an angle map (N, N, C)."""
+    """ducc0 alm (C, nalm) of sum_i L_i conj(Y_lm(w_i)) W_i over the disk texels of an angle map (N, N, C);
+    in single precision where epsilon allows it (ducc0: above 1e-6)."""
     n = env.shape[0]
     inside = _disk_mask(n)
-    weighted = (np.asarray(env, dtype=np.float64)[inside] * _solid_angles(n)[:, None]).T
+    dtype = np.float32 if epsilon > 1e-6 else np.float64
+    weighted = (np.asarray(env, dtype=np.float64)[inside] * _solid_angles(n)[:, None]).T.astype(dtype)
     loc = disk_locations(n)
     return np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=lmax, loc=loc,
                                                     epsilon=epsilon, nthreads=threads())[0] for ch in weighted])
@@ -129,7 +131,8 @@ def synthesise_at(alm: np.ndarray, lmax: int, loc: np.ndarray, epsilon: float = 
 def synthesise_cc_grid(alm: np.ndarray, lmax: int, n_theta: int, n_phi: int, out: np.ndarray | None = None) -> np.ndarray:
     """(C, n_theta, n_phi) values on the grid theta_r = r pi/(n_theta-1), phi_c = 2 pi c/n_phi
     (ducc0's Clenshaw-Curtis geometry: the grid sh.sh_synthesis_grid has always used), written into out."""
-    out = np.empty((alm.shape[0], n_theta, n_phi)) if out is None else out
+    if out is None:
+        out = np.empty((alm.shape[0], n_theta, n_phi), dtype=np.float32 if alm.dtype == np.complex64 else np.float64)
     for a, plane in zip(alm, out):
         _SHT.synthesis_2d(alm=np.ascontiguousarray(a[None]), spin=0, lmax=lmax, geometry="CC", ntheta=n_theta,
                           nphi=n_phi, nthreads=threads(), map=plane[None])
