@@ -187,7 +187,7 @@ def main() -> None:
                                                     for k, s in enumerate(EXPONENTS)))
                 print(f"    {'':<8} falls monotonically at every exponent: {not not_falling}"
                       + (f" (not at s = {not_falling})" if not_falling else ""))
-    print(f"\nworst over assets and exponents, mean/max %: " + ", ".join(f"{k} {v[0]:.3f}/{v[1]:.2f}" for k, v in worst.items()))
+    print("\nworst over assets and exponents, mean/max %: " + ", ".join(f"{k} {v[0]:.3f}/{v[1]:.2f}" for k, v in worst.items()))
 
 
 if __name__ == "__main__":

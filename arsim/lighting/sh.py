@@ -5,13 +5,15 @@ phi = atan2(d_y, -d_x) (the thesis's u = 1 - 2s, v = 2t - 1). Real SH with the C
 (eq. 2.27); coefficients are stored as the thesis does, index l(l+1)+m, order o = bands 0..o-1.
 
 Coefficients: c_lm = sum_i L_i Y_lm(w_i) W_i over the disk texels with their solid angles W_i
-(Alg. 4.4/4.5). Texels at the same disk radius share theta, so the Legendre functions are evaluated
-once per distinct radius (about N^2/8 of them) and the azimuthal sums per ring; the result is the
-texel sum itself, not an approximation of it. The loop over (l, m) and rings runs compiled
-(sh_kernel.py, on every core); the NumPy loop here does the same sums and is its reference.
+(Alg. 4.4/4.5), computed by ducc0's adjoint non-uniform SH transform (sht.texel_sums, 1e-10 relative).
+The ring sums that preceded it stay as its reference: texels at the same disk radius share theta, so the
+Legendre functions are evaluated once per distinct radius (about N^2/8 of them) and the azimuthal sums
+per ring (NumPy here; compiled in sh_kernel.project_rings).
 
-Maps: M_s = sum_l kappa_l(s) sum_m c_lm Y_lm (eq. 2.31, 2.33) is synthesised on a fine (theta, phi) grid
-(Legendre sums, then an inverse FFT along phi) and sampled bilinearly at the texel directions.
+Maps: M_s = sum_l kappa_l(s) w_l sum_m c_lm Y_lm (eq. 2.31, 2.33; w_l a window, 1 for plain truncation)
+is evaluated exactly at the texels up to DIRECT_MAX_ORDER and beyond GRID_MAX_ORDER (ducc0's
+non-uniform synthesis), and between them synthesised by ducc0 on a fine (theta, phi) grid and sampled
+bilinearly at the texel directions, as it always was.
 
 Y_lm evaluation: `stable` uses orthonormalised recurrences (no factorials), exact to any order used
 here. `faithful` evaluates Alg. 2.5/2.6 as printed: unnormalised P_l^m by Green's recurrence and
@@ -32,7 +34,7 @@ import scipy.fft
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.core.errors import ArsimError
 from arsim.lighting.phong import phong_zonal_coefficients
-from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, project_rings, synthesise_rings
+from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, project_rings
 from arsim.lighting.sht import (alm_bands, alm_from_real, disk_locations, sh_angles, synthesise_at, synthesise_cc_grid,
                                 texel_sums)
 
@@ -273,15 +275,13 @@ def sh_synthesis_grid(coeffs: np.ndarray, kappas: np.ndarray, n_theta: int, n_ph
         a = coeffs[ls * (ls + 1) + m]  # (order-m, C)
         a = (n_phi / 2) * np.sqrt(2.0) * (a - 1j * coeffs[ls * (ls + 1) - m]) if m > 0 else n_phi * a
         weighted[m, m:] = (kappas[:, m:, None] * a[None]).transpose(1, 0, 2).reshape(order - m, -1)
-    if compiled and not faithful:
-        spectrum = synthesise_rings(np.cos(theta), np.sin(theta), weighted, n_phi // 2 + 1)
-    else:
-        spectrum = np.zeros((n_maps * channels, n_theta, n_phi // 2 + 1), dtype=np.complex128)
-        for m, p in _Legendre(theta, order, faithful):
-            with np.errstate(invalid="ignore", over="ignore"):
-                if faithful:
-                    p = np.nan_to_num(p, nan=0.0, posinf=0.0, neginf=0.0)
-                spectrum[:, :, m] = weighted[m, m:].T @ p  # (E*C, n_theta), BLAS
+    # The NumPy reference and the faithful route:
+    spectrum = np.zeros((n_maps * channels, n_theta, n_phi // 2 + 1), dtype=np.complex128)
+    for m, p in _Legendre(theta, order, faithful):
+        with np.errstate(invalid="ignore", over="ignore"):
+            if faithful:
+                p = np.nan_to_num(p, nan=0.0, posinf=0.0, neginf=0.0)
+            spectrum[:, :, m] = weighted[m, m:].T @ p  # (E*C, n_theta), BLAS
     return scipy.fft.irfft(spectrum, n=n_phi, axis=-1, workers=-1).reshape(n_maps, channels, n_theta, n_phi)
 
 
