@@ -5,7 +5,7 @@ phi = atan2(d_y, -d_x) (the thesis's u = 1 - 2s, v = 2t - 1). Real SH with the C
 (eq. 2.27); coefficients are stored as the thesis does, index l(l+1)+m, order o = bands 0..o-1.
 
 Coefficients: c_lm = sum_i L_i Y_lm(w_i) W_i over the disk texels with their solid angles W_i
-(Alg. 4.4/4.5), computed by ducc0's adjoint non-uniform SH transform (sht.texel_sums, 1e-10 relative).
+(Alg. 4.4/4.5), computed by ducc0's adjoint non-uniform SH transform (sht.texel_sums, 1e-12 relative).
 The ring sums that preceded it stay as its reference: texels at the same disk radius share theta, so the
 Legendre functions are evaluated once per distinct radius (about N^2/8 of them) and the azimuthal sums
 per ring (NumPy here; compiled in sh_kernel.project_rings).
@@ -191,7 +191,7 @@ class _Orbits:
 
 def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False, compiled: bool = True) -> np.ndarray:
     """SH coefficients (order^2, C) of an angle map (N, N, C), summed over its disk texels with their
-    solid angles: through ducc0's adjoint non-uniform SH transform (sht.texel_sums, to 1e-10 relative).
+    solid angles: through ducc0's adjoint non-uniform SH transform (sht.texel_sums, to 1e-12 relative).
     compiled=False runs the same sums in NumPy (the reference); faithful, the thesis's factorials."""
     if compiled and not faithful:
         return texel_sums(env, order)
@@ -353,7 +353,7 @@ def probe_with_weights(env: np.ndarray) -> np.ndarray:
 
 def _evaluate_disk(coeffs: np.ndarray, kappas: np.ndarray, n: int) -> np.ndarray:
     """sum_lm kappa_l c_lm Y_lm at every disk texel, (E, K, C), by ducc0's non-uniform synthesis (exact
-    to 1e-10 relative, as sh_evaluate is exactly)."""
+    to 1e-12 relative, as sh_evaluate is exactly)."""
     n_maps, order = kappas.shape
     alm = alm_from_real(coeffs[: order * order], order)
     l = alm_bands(order - 1)

@@ -31,7 +31,7 @@ from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh_kernel import cubic_lookup_into
 
 _SHT = ducc0.sht.experimental
-EPSILON = 1e-10  # the NUFFTs' relative accuracy for `sh` (its maps must match the exact texel sums)
+EPSILON = 1e-12  # the NUFFTs' relative accuracy for `sh` (its coefficients must match the exact texel sums)
 FAST_EPSILON = 2e-6  # for `sht`, in single precision: far below its truncation, and about twice as fast
 TRUNCATION = 1e-6  # sht: drop bands whose zonal coefficient is below this (1e-4 left 30 % near a bright texel)
 GRID_TRUNCATION = 1e-4  # the bands the grid resolves with GRID_SAMPLES_PER_BAND samples
