@@ -35,7 +35,7 @@ from arsim.lighting.accurate import lobe_average_at  # noqa: E402
 from arsim.lighting.methods import MapParameters, bake  # noqa: E402
 from arsim.lighting.phong import phong_zonal_coefficients  # noqa: E402
 from arsim.lighting.sh import WINDOWS, synthesis_grid_size  # noqa: E402
-from arsim.lighting.sht import sh_angles  # noqa: E402
+from arsim.lighting.sht import sh_angles, sht_maps_from_source  # noqa: E402
 
 EXPONENTS = [1, 2, 10, 20, 40, 80, 160, 320, 1280]
 SHT = ducc0.sht.experimental
@@ -120,9 +120,10 @@ def main() -> None:
     parser.add_argument("--fine-texels", type=int, default=40,
                         help="random texels for the fine reference (plus the bright patch): it costs (fine)² per texel")
     parser.add_argument("--quick", action="store_true", help="skip the fine reference and the window sweep")
+    parser.add_argument("--skip-windows", action="store_true", help="skip the window sweep and mc")
     args = parser.parse_args()
     header = "  ".join(f"{f's={s}':>12}" for s in EXPONENTS)
-    worst = {"sht": [0.0, 0.0], "sht fine": [0.0, 0.0]}
+    worst = {"sht": [0.0, 0.0], "sht fine": [0.0, 0.0], "sht equirect fine": [0.0, 0.0]}
     for name in args.assets.split(","):
         source = read_hdr(assets_dir() / "envmaps" / f"{name}.exr")
         env = to_layout(source, "anglemap", 512)
@@ -141,6 +142,10 @@ def main() -> None:
         print(f"  {'sht vs brute force 512²':<30}{row(e)}")
         worst["sht"] = [max(worst["sht"][0], max(x.mean_percent for x in e)), max(worst["sht"][1], max(x.max_percent for x in e))]
         print(f"  {'peer vs brute force 512²':<30}{row(errors(reference, peer_maps, texels))}")
+        # sht from the equirect itself (its own 1024 x 512 texels): nothing resampled before the sums.
+        src_s, src_maps = timed_best(3, lambda: sht_maps_from_source(source, 512, EXPONENTS))
+        e = errors(reference, src_maps, texels)
+        print(f"  {'sht from equirect vs 512²':<30}{row(e)}   ({src_s:.3f} s)")
         if not args.quick:
             fine = to_layout(source, "anglemap", args.fine)
             start = time.perf_counter()
@@ -152,6 +157,10 @@ def main() -> None:
             worst["sht fine"] = [max(worst["sht fine"][0], max(x.mean_percent for x in e)),
                                  max(worst["sht fine"][1], max(x.max_percent for x in e))]
             print(f"  {f'peer vs brute force {args.fine}²':<30}{row(errors(fine_ref, peer_maps, fine_texels))}")
+            e = errors(fine_ref, src_maps, fine_texels)
+            print(f"  {f'sht equirect vs {args.fine}²':<30}{row(e)}")
+            worst["sht equirect fine"] = [max(worst["sht equirect fine"][0], max(x.mean_percent for x in e)),
+                                          max(worst["sht equirect fine"][1], max(x.max_percent for x in e))]
 
         # sh at order 256 against what ducc0 itself needs for one analysis and nine syntheses of its grid.
         params = MapParameters(sh_order=256)
@@ -169,13 +178,13 @@ def main() -> None:
         print(f"  sh order 256 (coefficients + nine maps): {sh_s:.2f} s; ducc0 alone (3 analyses + 27 syntheses of "
               f"its {n_theta}x{n_phi} grid): {ducc_s:.2f} s; ratio {sh_s / ducc_s:.2f}x")
 
-        if name == args.assets.split(",")[0]:
+        if name == args.assets.split(",")[0] and not args.skip_windows:
             sh64 = bake(env, EXPONENTS, "sh", MapParameters(sh_order=64))
             mc = bake(env, EXPONENTS, "mc", MapParameters(samples=64))
             print(f"  mc, 64 samples: {mc.seconds_total:.1f} s; sh order 64: {sh64.seconds_total:.2f} s; "
                   f"mc/sh64 = {mc.seconds_total / sh64.seconds_total:.1f}x")
 
-        if not args.quick:
+        if not args.quick and not args.skip_windows:
             orders = [8, 16, 32, 64, 128, 256]
             print(f"  sh mean error % against brute force 512², by window and order {orders}:")
             for window in WINDOWS:

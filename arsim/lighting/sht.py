@@ -26,7 +26,9 @@ from collections.abc import Sequence
 import ducc0
 import numpy as np
 
-from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
+from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, equirect_directions,
+                                    equirect_solid_angles)
+from arsim.core.resample import detect_layout
 from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh_kernel import cubic_lookup_into
 
@@ -235,3 +237,37 @@ def sht_maps(env: np.ndarray, exponents: Sequence[float]) -> np.ndarray:
     """Maps (E, N, N, 3) float32 for the exponents."""
     prepared = sht_prepare(env, exponents)
     return np.stack([sht_map(env, prepared, s) for s in exponents])
+
+
+def _source_texels(source: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(values (M, 3), loc (M, 2), solid angles (M,)) of every texel of an angle map's disk or an equirect."""
+    if detect_layout(source, "source") == "anglemap":
+        n = source.shape[0]
+        return np.asarray(source, dtype=np.float64)[_disk_mask(n)][:, :3], disk_locations(n), _solid_angles(n)
+    h = source.shape[0]
+    theta, phi = sh_angles(equirect_directions(h).reshape(-1, 3))
+    return (np.asarray(source, dtype=np.float64).reshape(-1, source.shape[2])[:, :3], np.stack([theta, phi], axis=1),
+            equirect_solid_angles(h).ravel())
+
+
+def sht_maps_from_source(source: np.ndarray, n: int, exponents: Sequence[float]) -> np.ndarray:
+    """Maps (E, n, n, 3) float32 from a source at its own resolution and layout (angle map or equirect):
+    the texel sums run over the source's texels, so nothing is resampled before the lobe averages (a
+    small bright source keeps its energy); the normaliser is the source's own lobe sum of weights."""
+    values, loc, weights = _source_texels(source)
+    lmax = max(bands_for_exponent(s) for s in exponents) - 1
+    weighted = np.concatenate([values * weights[:, None], weights[:, None]], axis=1).T.astype(np.float32)
+    alm = np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=lmax, loc=loc,
+                                                   epsilon=FAST_EPSILON, nthreads=threads())[0] for ch in weighted])
+    l, m, _ = _alm_index(lmax)
+    maps = np.zeros((len(exponents), n * n, 3), dtype=np.float32)
+    ones = np.ones(len(disk_locations(n)))
+    for k, s in enumerate(exponents):
+        bands = bands_for_exponent(s)
+        keep = (l < bands) & (m < bands)
+        size = grid_size(max(bands // 2, bands_for_exponent(s, GRID_TRUNCATION)))
+        grid = synthesise_cc_grid(zonal_scale(alm[:, keep], phong_zonal_coefficients(s, bands)), bands - 1, *size)
+        den = np.zeros((len(ones), 1))
+        cubic_lookup_into(den, np.arange(len(ones)), grid[3:].reshape(1, -1), *size, *grid_coordinates(n, *size), ones)
+        cubic_lookup_into(maps[k], _disk_index(n), grid[:3].reshape(3, -1), *size, *grid_coordinates(n, *size), den[:, 0])
+    return maps.reshape(len(exponents), n, n, 3)
