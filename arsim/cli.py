@@ -25,6 +25,7 @@ from arsim.evaluate.diff import DEFAULT_MAX_FLIP, check_max_flip
 from arsim.lighting.accurate import MAX_EXPONENT
 from arsim.lighting.bake_output import write_bake
 from arsim.lighting.methods import DEFAULT_EXPONENTS, LOOP_METHODS, METHODS, MapParameters, bake
+from arsim.lighting.sh import WINDOWS
 from arsim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_to_toml
 from arsim.scenario.loader import scenario_path
 from arsim.sensors.formats import FORMATS as RECORDING_FORMATS, detect_format
@@ -573,7 +574,8 @@ def _probe(path: Path, size: int | None) -> np.ndarray:
 
 
 def _parameters(args: argparse.Namespace) -> MapParameters:
-    return MapParameters(sh_order=args.sh_order, sh_faithful=args.sh_faithful, samples=args.samples, seed=args.seed)
+    return MapParameters(sh_order=args.sh_order, sh_faithful=args.sh_faithful, sh_window=args.sh_window,
+                         samples=args.samples, seed=args.seed)
 
 
 def _tracking_p95(m: dict) -> str:
@@ -836,6 +838,8 @@ def _map_options(p: argparse.ArgumentParser) -> None:
                    help=f"sh: bands 0..L-1, L² coefficients (default {MapParameters.sh_order})")
     p.add_argument("--sh-faithful", action="store_true",
                    help="sh: evaluate Y_lm with factorials in double precision as the thesis's Alg. 2.5/2.6")
+    p.add_argument("--sh-window", choices=WINDOWS, default=MapParameters.sh_window,
+                   help="sh: plain truncation (none, the default) or a window against ringing (README: Irradiance and reflection maps)")
     p.add_argument("--samples", type=_positive("--samples"), default=MapParameters.samples, metavar="K",
                    help=f"mc: importance samples per texel (default {MapParameters.samples})")
     p.add_argument("--seed", type=_non_negative("--seed"), default=0, help="mc: random seed, 0 or more (default 0)")

@@ -41,7 +41,12 @@ def test_bake_resamples_an_equirect_to_the_requested_size(tmp_path):
 def test_sh_parameters_are_recorded(tmp_path, probe32):
     r = arsim("bake", probe32, "-o", tmp_path, "--method", "sh", "--sh-order", "9", "--sh-faithful", "--spec", "1")
     assert r.returncode == 0, r.stderr
-    assert json.loads((tmp_path / "bake.json").read_text())["parameters"] == {"sh_order": 9, "sh_faithful": True}
+    assert json.loads((tmp_path / "bake.json").read_text())["parameters"] == {"sh_order": 9, "sh_faithful": True,
+                                                                              "sh_window": "none"}
+    r = arsim("bake", probe32, "-o", tmp_path / "w", "--method", "sh", "--sh-order", "9", "--sh-window", "hann",
+              "--spec", "1")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "w" / "bake.json").read_text())["parameters"]["sh_window"] == "hann"
 
 
 def test_compare_methods_writes_tables_and_figures(tmp_path, probe32):

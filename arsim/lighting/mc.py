@@ -19,6 +19,7 @@ import numpy as np
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_radius, direction_to_anglemap_st
 from arsim.core.errors import ArsimError
 from arsim.core.resample import extend_beyond_rim
+from arsim.lighting.mc_kernel import mc_values
 from arsim.lighting.mipmap import mip_chain, sample_trilinear
 
 CHUNK_SAMPLES = 8192 * 64  # samples drawn at once: texels per chunk x samples per texel
@@ -57,8 +58,9 @@ def sample_phong_lobe(d: np.ndarray, exponent: float, u1: np.ndarray, u2: np.nda
 
 
 def mc_maps(env: np.ndarray, exponents: Sequence[float], samples: int = 64, seed: int = 0,
-            filtered: bool = True) -> np.ndarray:
-    """Maps (E, N, N, 3) float32 from `samples` importance samples per texel (filtered or not)."""
+            filtered: bool = True, compiled: bool = True) -> np.ndarray:
+    """Maps (E, N, N, 3) float32 from `samples` importance samples per texel (filtered or not).
+    compiled: the samples' arithmetic and lookups in mc_kernel (same uniforms, same sums); False: NumPy."""
     check_samples(samples)
     n = env.shape[0]
     chain = mip_chain(extend_beyond_rim(env))
@@ -66,6 +68,10 @@ def mc_maps(env: np.ndarray, exponents: Sequence[float], samples: int = 64, seed
     dirs = anglemap_directions(n)[inside]
     maps = np.zeros((len(exponents), n, n, 3), dtype=np.float32)
     texel_solid_angle = (2.0 * np.pi / n) ** 2
+    if compiled:
+        flat = np.concatenate([level[..., :3].ravel() for level in chain])
+        sizes = np.array([level.shape[0] for level in chain], dtype=np.int64)
+        offsets = np.r_[0, np.cumsum(sizes * sizes * 3)[:-1]].astype(np.int64)
     for k, s in enumerate(exponents):
         # One stream per (seed, exponent): a map is the same whether baked alone or with others.
         rng = np.random.default_rng([seed, int(np.float64(s).view(np.uint64))])
@@ -74,6 +80,10 @@ def mc_maps(env: np.ndarray, exponents: Sequence[float], samples: int = 64, seed
         for start in range(0, len(dirs), chunk):
             d = dirs[start:start + chunk]
             u1, u2 = rng.random((2, len(d), samples))
+            if compiled:
+                values[start:start + len(d)] = mc_values(d, u1, u2, float(s), flat, offsets, sizes, texel_solid_angle,
+                                                         LOD_BIAS, filtered)
+                continue
             w, pdf = sample_phong_lobe(d, s, u1, u2)
             st = direction_to_anglemap_st(w.reshape(-1, 3))
             if filtered:

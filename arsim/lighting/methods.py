@@ -20,7 +20,8 @@ from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, accurate_maps, che
 from arsim.lighting.fast import fast_coefficients, fast_maps
 from arsim.lighting.mc import check_samples, mc_maps
 from arsim.lighting.mipmap import mipmap_maps
-from arsim.lighting.sh import MAX_ORDER, sh_coefficients, sh_maps
+from arsim.lighting.sh import GRID_MAX_ORDER, MAX_ORDER, WINDOWS, sh_coefficients, sh_maps
+from arsim.lighting.sht import sht_map, sht_prepare
 
 DEFAULT_EXPONENTS = (1, 2, 10, 20, 40, 80, 160, 240, 320, 640, 1280)
 SH_ORDER = 35  # sh: bands 0..SH_ORDER-1, the thesis's order in its figures
@@ -32,6 +33,7 @@ class MapParameters:
 
     sh_order: int = SH_ORDER  # sh: bands 0..sh_order-1
     sh_faithful: bool = False  # sh: evaluate Y_lm as Alg. 2.5/2.6 (factorials in double)
+    sh_window: str = "none"  # sh: plain truncation, or a window against ringing (sh.WINDOWS)
     samples: int = 64  # mc: importance samples per texel
     seed: int = 0  # mc
     bounds_threshold: float = DEFAULT_BOUNDS_THRESHOLD  # bounds: smallest lobe value kept
@@ -39,6 +41,11 @@ class MapParameters:
     def check(self) -> None:
         if not 1 <= self.sh_order <= MAX_ORDER:
             raise ArsimError(f"SH order {self.sh_order} is out of range: give 1 to {MAX_ORDER}")
+        if self.sh_faithful and self.sh_order > GRID_MAX_ORDER:
+            raise ArsimError(f"SH order {self.sh_order} is out of range for --sh-faithful: give 1 to {GRID_MAX_ORDER} "
+                             "(its factorials lose every band from 86 anyway)")
+        if self.sh_window not in WINDOWS:
+            raise ArsimError(f"SH window '{self.sh_window}' is unknown: give one of {', '.join(WINDOWS)}")
         if self.samples < 1:
             raise ArsimError(f"sample count {self.samples} is out of range: give at least 1")
         check_samples(self.samples)
@@ -84,8 +91,11 @@ METHODS = {
         Method("mipmap", "trilinear lookup in a 2x2-box MIP chain at the level of eq. 4.2/4.3 (Alg. 4.3)",
                lambda env, ex, p: None, lambda env, _, s, p: mipmap_maps(env, [s])[0]),
         Method("sh", "spherical harmonics of --sh-order bands convolved with the Phong lobe (Alg. 4.4-4.7)",
-               _sh_prepare, lambda env, c, s, p: sh_maps(env, [s], p.sh_order, p.sh_faithful, coeffs=c)[0],
-               ("sh_order", "sh_faithful"), in_loop=True),
+               _sh_prepare,
+               lambda env, c, s, p: sh_maps(env, [s], p.sh_order, p.sh_faithful, coeffs=c, window=p.sh_window)[0],
+               ("sh_order", "sh_faithful", "sh_window"), in_loop=True),
+        Method("sht", "exact texel sums and per-exponent syntheses through ducc0's fast SH transforms (fastest)",
+               lambda env, ex, p: sht_prepare(env, ex), lambda env, c, s, p: sht_map(env, c, s)),
         Method("mc", "Monte Carlo importance sampling with MIP-filtered samples (Colbert and Krivanek)",
                lambda env, ex, p: None, lambda env, _, s, p: mc_maps(env, [s], p.samples, p.seed)[0],
                ("samples", "seed")),

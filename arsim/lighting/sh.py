@@ -5,13 +5,15 @@ phi = atan2(d_y, -d_x) (the thesis's u = 1 - 2s, v = 2t - 1). Real SH with the C
 (eq. 2.27); coefficients are stored as the thesis does, index l(l+1)+m, order o = bands 0..o-1.
 
 Coefficients: c_lm = sum_i L_i Y_lm(w_i) W_i over the disk texels with their solid angles W_i
-(Alg. 4.4/4.5). Texels at the same disk radius share theta, so the Legendre functions are evaluated
-once per distinct radius (about N^2/8 of them) and the azimuthal sums per ring; the result is the
-texel sum itself, not an approximation of it. The loop over (l, m) and rings runs compiled
-(sh_kernel.py, on every core); the NumPy loop here does the same sums and is its reference.
+(Alg. 4.4/4.5), computed by ducc0's adjoint non-uniform SH transform (sht.texel_sums, 1e-12 relative).
+The ring sums that preceded it stay as its reference: texels at the same disk radius share theta, so the
+Legendre functions are evaluated once per distinct radius (about N^2/8 of them) and the azimuthal sums
+per ring (NumPy here; compiled in sh_kernel.project_rings).
 
-Maps: M_s = sum_l kappa_l(s) sum_m c_lm Y_lm (eq. 2.31, 2.33) is synthesised on a fine (theta, phi) grid
-(Legendre sums, then an inverse FFT along phi) and sampled bilinearly at the texel directions.
+Maps: M_s = sum_l kappa_l(s) w_l sum_m c_lm Y_lm (eq. 2.31, 2.33; w_l a window, 1 for plain truncation)
+is evaluated exactly at the texels up to DIRECT_MAX_ORDER and beyond GRID_MAX_ORDER (ducc0's
+non-uniform synthesis), and between them synthesised by ducc0 on a fine (theta, phi) grid and sampled
+bilinearly at the texel directions, as it always was.
 
 Y_lm evaluation: `stable` uses orthonormalised recurrences (no factorials), exact to any order used
 here. `faithful` evaluates Alg. 2.5/2.6 as printed: unnormalised P_l^m by Green's recurrence and
@@ -30,20 +32,40 @@ import numpy as np
 import scipy.fft
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
+from arsim.core.errors import ArsimError
 from arsim.lighting.phong import phong_zonal_coefficients
-from arsim.lighting.sh_kernel import bilinear_lookup, project_rings, synthesise_rings
+from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, project_rings
+from arsim.lighting.sht import (alm_bands, alm_from_real, disk_locations, sh_angles, synthesise_at, synthesise_cc_grid,
+                                texel_sums)
 
-MAX_ORDER = 512
-# Up to this order the maps are evaluated directly at every texel (exact); beyond, through a grid.
+MAX_ORDER = 1024
+# Up to this order the maps are evaluated directly at every texel (exact); up to GRID_MAX_ORDER through a
+# (theta, phi) grid and bilinear lookups (as they always were); beyond, directly again (a grid of 4 samples
+# per band would not fit in memory).
 DIRECT_MAX_ORDER = 16
+GRID_MAX_ORDER = 512
+
+# sh's windows against ringing (README: Irradiance and reflection maps), factors w_l for l < order.
+WINDOWS = ("none", "hann", "lanczos", "sloan")
+SLOAN_FLOOR = 0.01  # sloan: the window falls to this at l = order
 
 
-def sh_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(theta, phi) of directions in the SH frame: pole +z, phi = atan2(d_y, -d_x) in [0, 2 pi)."""
-    d = np.asarray(directions, dtype=np.float64)
-    theta = np.arctan2(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
-    phi = np.mod(np.arctan2(d[..., 1], -d[..., 0]), 2 * np.pi)
-    return theta, phi
+def sh_window(name: str, order: int) -> np.ndarray:
+    """Factors w_l, l = 0..order-1, that multiply the zonal coefficients: `none` plain truncation; `hann`
+    (1 + cos(pi l / order)) / 2; `lanczos` sinc(l / order); `sloan` 1 / (1 + lambda l^2 (l+1)^2), the
+    Laplacian-penalty deringing of Sloan (minimising the squared error plus lambda times the squared
+    Laplacian), lambda set so that the factor is SLOAN_FLOOR at l = order."""
+    l = np.arange(order, dtype=np.float64)
+    if name == "none":
+        return np.ones(order)
+    if name == "hann":
+        return 0.5 * (1.0 + np.cos(np.pi * l / order))
+    if name == "lanczos":
+        return np.sinc(l / order)
+    if name == "sloan":
+        lam = (1.0 / SLOAN_FLOOR - 1.0) / (order * order * (order + 1.0) ** 2)
+        return 1.0 / (1.0 + lam * (l * (l + 1.0)) ** 2)
+    raise ArsimError(f"SH window '{name}' is unknown; use one of {', '.join(WINDOWS)}")
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -169,7 +191,16 @@ class _Orbits:
 
 def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False, compiled: bool = True) -> np.ndarray:
     """SH coefficients (order^2, C) of an angle map (N, N, C), summed over its disk texels with their
-    solid angles. compiled=False runs the same sums in NumPy (the reference of sh_kernel)."""
+    solid angles: through ducc0's adjoint non-uniform SH transform (sht.texel_sums, to 1e-12 relative).
+    compiled=False runs the same sums in NumPy (the reference); faithful, the thesis's factorials."""
+    if compiled and not faithful:
+        return texel_sums(env, order)
+    return _sh_coefficients_rings(env, order, faithful, compiled)
+
+
+def _sh_coefficients_rings(env: np.ndarray, order: int, faithful: bool = False, compiled: bool = True) -> np.ndarray:
+    """The texel sums per ring of equal disk radius and per symmetry orbit (the NumPy reference, the
+    faithful route, and with compiled=True the numba kernel that preceded ducc0's transform)."""
     n = env.shape[0]
     orbits = _Orbits.of(n)
     inside = anglemap_disk_mask(n)
@@ -228,6 +259,13 @@ def sh_synthesis_grid(coeffs: np.ndarray, kappas: np.ndarray, n_theta: int, n_ph
     phi_c = 2 pi c / n_phi, for E sets of zonal factors kappas (E, order). compiled=False: NumPy (reference)."""
     n_maps, order = kappas.shape
     channels = coeffs.shape[1]
+    if compiled and not faithful:  # ducc0's synthesis on its Clenshaw-Curtis grid: the same grid
+        alm = alm_from_real(coeffs[: order * order], order)
+        l = alm_bands(order - 1)
+        out = np.empty((n_maps, channels, n_theta, n_phi))
+        for k, planes in zip(kappas, out):
+            synthesise_cc_grid(alm * k[l], order - 1, n_theta, n_phi, out=planes)
+        return out
     theta = np.linspace(0.0, np.pi, n_theta)
     # Per m, the weighted coefficients as the spectrum of phi:
     # sum_m sqrt2 (a_m cos m phi + b_m sin m phi) = Re sum_m sqrt2 (a_m - i b_m) e^{i m phi}
@@ -237,15 +275,13 @@ def sh_synthesis_grid(coeffs: np.ndarray, kappas: np.ndarray, n_theta: int, n_ph
         a = coeffs[ls * (ls + 1) + m]  # (order-m, C)
         a = (n_phi / 2) * np.sqrt(2.0) * (a - 1j * coeffs[ls * (ls + 1) - m]) if m > 0 else n_phi * a
         weighted[m, m:] = (kappas[:, m:, None] * a[None]).transpose(1, 0, 2).reshape(order - m, -1)
-    if compiled and not faithful:
-        spectrum = synthesise_rings(np.cos(theta), np.sin(theta), weighted, n_phi // 2 + 1)
-    else:
-        spectrum = np.zeros((n_maps * channels, n_theta, n_phi // 2 + 1), dtype=np.complex128)
-        for m, p in _Legendre(theta, order, faithful):
-            with np.errstate(invalid="ignore", over="ignore"):
-                if faithful:
-                    p = np.nan_to_num(p, nan=0.0, posinf=0.0, neginf=0.0)
-                spectrum[:, :, m] = weighted[m, m:].T @ p  # (E*C, n_theta), BLAS
+    # The NumPy reference and the faithful route:
+    spectrum = np.zeros((n_maps * channels, n_theta, n_phi // 2 + 1), dtype=np.complex128)
+    for m, p in _Legendre(theta, order, faithful):
+        with np.errstate(invalid="ignore", over="ignore"):
+            if faithful:
+                p = np.nan_to_num(p, nan=0.0, posinf=0.0, neginf=0.0)
+            spectrum[:, :, m] = weighted[m, m:].T @ p  # (E*C, n_theta), BLAS
     return scipy.fft.irfft(spectrum, n=n_phi, axis=-1, workers=-1).reshape(n_maps, channels, n_theta, n_phi)
 
 
@@ -315,13 +351,23 @@ def probe_with_weights(env: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(env, dtype=np.float64)[..., :3], np.ones(env.shape[:2] + (1,))], axis=-1)
 
 
+def _evaluate_disk(coeffs: np.ndarray, kappas: np.ndarray, n: int) -> np.ndarray:
+    """sum_lm kappa_l c_lm Y_lm at every disk texel, (E, K, C), by ducc0's non-uniform synthesis (exact
+    to 1e-12 relative, as sh_evaluate is exactly)."""
+    n_maps, order = kappas.shape
+    alm = alm_from_real(coeffs[: order * order], order)
+    l = alm_bands(order - 1)
+    return np.stack([synthesise_at(alm * k[l], order - 1, disk_locations(n)) for k in kappas])
+
+
 def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[int], faithful: bool = False,
-            coeffs: np.ndarray | None = None, normalise: bool = False) -> np.ndarray:
+            coeffs: np.ndarray | None = None, normalise: bool = False, window: str = "none") -> np.ndarray:
     """Maps (E, N, N, 3) float32 from SH (bands 0..order-1); 0 outside the disk.
 
     order may be one per exponent (`fast` gives each the order its lobe needs); the coefficients are
     computed once, at the largest order. normalise divides by the SH image of the weights (coeffs of
-    probe_with_weights), like Alg. 4.1's sum f W; Alg. 4.7 does not, and is reproduced without."""
+    probe_with_weights), like Alg. 4.1's sum f W; Alg. 4.7 does not, and is reproduced without. window
+    (WINDOWS) multiplies the zonal coefficients by sh_window's factors (`none`: plain truncation)."""
     n = env.shape[0]
     orders = [int(order)] * len(exponents) if np.isscalar(order) else [int(o) for o in order]
     if coeffs is None:
@@ -331,15 +377,16 @@ def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[i
     maps = np.zeros((len(exponents), n, n, 3), dtype=np.float32)
     for o in sorted(set(orders)):
         which = [k for k, ok in enumerate(orders) if ok == o]
-        kappas = np.stack([phong_zonal_coefficients(exponents[k], o) for k in which])
-        if o <= DIRECT_MAX_ORDER:
+        kappas = np.stack([phong_zonal_coefficients(exponents[k], o) for k in which]) * sh_window(window, o)
+        if faithful and o <= DIRECT_MAX_ORDER:
             all_values = sh_evaluate(coeffs[: o * o], kappas, anglemap_directions(n)[inside], faithful)
+        elif not faithful and (o <= DIRECT_MAX_ORDER or o > GRID_MAX_ORDER):
+            all_values = _evaluate_disk(coeffs, kappas, n)
         else:
             size = synthesis_grid_size(o)
-            grid = sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful)
-            # One lookup for all maps of this order: each gather then fetches every map's channels.
-            flat = _disk_sampler(n, *size)(grid.reshape((-1,) + grid.shape[2:]))
-            all_values = flat.reshape(flat.shape[0], len(which), -1).transpose(1, 0, 2)
+            sampler = _disk_sampler(n, *size)
+            all_values = np.stack([lookup_channels(grid.reshape(grid.shape[0], -1), sampler.index, sampler.weight)
+                                   for grid in sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful)])
         for values, k in zip(all_values, which):
             if normalise:
                 den = values[:, 3:]

@@ -1,4 +1,5 @@
-"""The compiled heart of `sh_coefficients`: ring sums times associated Legendre functions, for every (l, m).
+"""Compiled loops of the SH maps: the ring sums times associated Legendre functions for every (l, m) that
+computed `sh_coefficients` before ducc0 (kept as a reference), and the grid lookups of sh.py and sht.py.
 
 Per m, the azimuthal sums of each ring are gathered from its orbits' partial sums, then the orthonormal
 Legendre recurrence runs over the rings in blocks small enough for the first-level cache, with the
@@ -115,38 +116,6 @@ def project_rings(cos_theta, sin_theta, ring_of_orbit, alpha, partial, order):  
     return out
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True)
-def synthesise_rings(cos_theta, sin_theta, weighted, n_freq):  # pragma: no cover (compiled)
-    """Spectrum (Q, R, n_freq) complex: [q, r, m] = sum_l weighted[m, l, q] P~_lm(theta_r) for m < order
-    (zero above), weighted being (order, order, Q) complex with [m, l] used for l >= m. The inverse FFT
-    of it along m gives the synthesis grid (sh.sh_synthesis_grid)."""
-    order = weighted.shape[0]
-    n_q = weighted.shape[2]
-    n_rings = cos_theta.size
-    out = np.zeros((n_q, n_rings, n_freq), dtype=np.complex128)
-    perm = _interleaved(order)
-    for k in numba.prange(order):
-        m = perm[k]
-        n_l = order - m
-        ca, cab, pmm_factor, start1 = _recurrence(m, order)
-        for r in range(n_rings):
-            x = cos_theta[r]
-            p0 = pmm_factor * (-sin_theta[r]) ** m
-            for q in range(n_q):
-                out[q, r, m] = weighted[m, m, q] * p0
-            if n_l > 1:
-                p1 = start1 * x * p0
-                for q in range(n_q):
-                    out[q, r, m] += weighted[m, m + 1, q] * p1
-                for j in range(2, n_l):
-                    v = ca[j] * x * p1 - cab[j] * p0
-                    p0 = p1
-                    p1 = v
-                    for q in range(n_q):
-                        out[q, r, m] += weighted[m, m + j, q] * v
-    return out
-
-
 @numba.njit(parallel=True, cache=True)
 def bilinear_lookup(texels, index, weight):  # pragma: no cover (compiled)
     """(K, C): sum over the four corners c of weight[k, c] texels[index[k, c]], texels being (P, C)."""
@@ -160,3 +129,66 @@ def bilinear_lookup(texels, index, weight):  # pragma: no cover (compiled)
             for ch in range(channels):
                 out[k, ch] += w * texels[row, ch]
     return out
+
+
+@numba.njit(parallel=True, cache=True)
+def lookup_channels(grid, index, weight):  # pragma: no cover (compiled)
+    """(K, C): sum over the four corners j of weight[k, j] grid[c, index[k, j]], grid being (C, P) (each
+    channel's plane as ducc0 writes it, no transpose)."""
+    channels = grid.shape[0]
+    out = np.empty((index.shape[0], channels))
+    for k in numba.prange(index.shape[0]):
+        for ch in range(channels):
+            v = 0.0
+            for j in range(4):
+                v += weight[k, j] * grid[ch, index[k, j]]
+            out[k, ch] = v
+    return out
+
+
+@numba.njit(inline="always")
+def _catmull_rom(t):  # pragma: no cover (compiled)
+    t2 = t * t
+    t3 = t2 * t
+    return (0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0), 0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+            0.5 * (t3 - t2))
+
+
+@numba.njit(parallel=True, cache=True)
+def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den):  # pragma: no cover (compiled)
+    """out[texel_index[k], c] = the Catmull-Rom (bicubic) value of the (C <= 3, n_theta * n_phi) grid at fractional
+    (rows[k], cols[k]), divided by den[k] (0 where den[k] <= 0). Rows past a pole continue on the far side
+    of it (row -r is row r half a turn round), columns wrap."""
+    channels = grid.shape[0]
+    half = n_phi // 2
+    for k in numba.prange(rows.size):
+        r0 = int(math.floor(rows[k]))
+        c0 = int(math.floor(cols[k]))
+        wr = _catmull_rom(rows[k] - r0)
+        wc = _catmull_rom(cols[k] - c0)
+        # Three accumulators (the channels this is used with: 1 or 3; a single channel is read thrice).
+        c1 = min(1, channels - 1)
+        c2 = min(2, channels - 1)
+        a0 = a1 = a2 = 0.0
+        for i in range(4):
+            r = r0 - 1 + i
+            shift = 0
+            if r < 0:
+                r = -r
+                shift = half
+            elif r > n_theta - 1:
+                r = 2 * (n_theta - 1) - r
+                shift = half
+            for j in range(4):
+                q = r * n_phi + (c0 - 1 + j + shift) % n_phi
+                w = wr[i] * wc[j]
+                a0 += w * grid[0, q]
+                a1 += w * grid[c1, q]
+                a2 += w * grid[c2, q]
+        d = den[k]
+        t = texel_index[k]
+        out[t, 0] = a0 / d if d > 0 else 0.0
+        if channels > 1:
+            out[t, 1] = a1 / d if d > 0 else 0.0
+        if channels > 2:
+            out[t, 2] = a2 / d if d > 0 else 0.0

@@ -1,0 +1,273 @@
+"""`sht`: the maps through ducc0's fast spherical-harmonic transforms, and the transforms `sh` and `fast` share.
+
+The maps are convolutions of the sphere with the rotationally symmetric Phong lobe, so in SH they are the
+probe's coefficients times the lobe's zonal coefficients kappa_l(s) (eq. 2.31/2.33). Here:
+
+- the coefficients are the exact sums over the source angle map's texels with their solid angles (what
+  `accurate` sums), at the source's own resolution, through ducc0's adjoint non-uniform synthesis
+  (`adjoint_synthesis_general`: a NUFFT, accurate to EPSILON) -- one transform shared by all exponents;
+- the weights' own coefficients (a channel of ones) ride along, so each map is divided by the lobe sum
+  of the texel weights as `accurate` divides by sum f W;
+- each exponent's map is synthesised directly at the output texels' directions (`synthesis_general`), at
+  the bandlimit its lobe needs: the first band where kappa_l has fallen below TRUNCATION (about
+  sqrt(2 s ln(1/TRUNCATION)) for large s), never below MIN_BANDS, on a Clenshaw-Curtis grid fine
+  enough for the lobe (grid_size), from which a bicubic lookup reads the texels.
+
+Frame and real-SH convention: as sh.py (pole +z, phi = atan2(d_y, -d_x), Condon-Shortley phase, index
+l(l+1)+m); ducc0's complex a_lm (healpy's layout, m >= 0) map to them by c_l0 = a_l0,
+c_lm = sqrt2 Re a_lm, c_l(-m) = -sqrt2 Im a_lm.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+
+import ducc0
+import numpy as np
+
+from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, equirect_directions,
+                                    equirect_solid_angles)
+from arsim.core.resample import detect_layout
+from arsim.lighting.phong import phong_zonal_coefficients
+from arsim.lighting.sh_kernel import cubic_lookup_into
+
+_SHT = ducc0.sht.experimental
+EPSILON = 1e-12  # the NUFFTs' relative accuracy for `sh` (its coefficients must match the exact texel sums)
+FAST_EPSILON = 2e-6  # for `sht`, in single precision: far below its truncation, and about twice as fast
+TRUNCATION = 1e-6  # sht: drop bands whose zonal coefficient is below this (1e-4 left 30 % near a bright texel)
+GRID_TRUNCATION = 1e-4  # the bands the grid resolves with GRID_SAMPLES_PER_BAND samples
+MAX_BANDS_SEARCH = 1024
+MIN_BANDS = 48  # the clamped cosine of s = 1 decays only like l^-2.5
+GRID_SAMPLES_PER_BAND = 4
+
+
+def threads() -> int:
+    return 0  # ducc0: every hardware thread
+
+
+def sh_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(theta, phi) of directions in the SH frame: pole +z, phi = atan2(d_y, -d_x) in [0, 2 pi)."""
+    d = np.asarray(directions, dtype=np.float64)
+    theta = np.arctan2(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
+    phi = np.mod(np.arctan2(d[..., 1], -d[..., 0]), 2 * np.pi)
+    return theta, phi
+
+
+@functools.lru_cache(maxsize=4)
+def disk_locations(n: int) -> np.ndarray:
+    """(M, 2) (theta, phi) of the disk texels of an N x N angle map, row-major (ducc0's `loc`)."""
+    theta, phi = sh_angles(anglemap_directions(n)[anglemap_disk_mask(n)])
+    loc = np.stack([theta, phi], axis=1)
+    loc.setflags(write=False)
+    return loc
+
+
+@functools.lru_cache(maxsize=16)
+def _alm_index(lmax: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every ducc0 alm slot (healpy order, m-major): its l, m and the real-SH row l(l+1)+m."""
+    m = np.repeat(np.arange(lmax + 1), np.arange(lmax + 1, 0, -1))
+    l = np.arange(m.size) - (m * (2 * lmax + 1 - m)) // 2
+    out = (l, m, l * (l + 1) + m)
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def alm_bands(lmax: int) -> np.ndarray:
+    """The band l of every ducc0 alm slot of lmax."""
+    return _alm_index(lmax)[0]
+
+
+def real_from_alm(alm: np.ndarray, order: int) -> np.ndarray:
+    """Real coefficients (order^2, C) from ducc0's complex alm (C, nalm) of lmax = order-1."""
+    l, m, row = _alm_index(order - 1)
+    out = np.zeros((order * order, alm.shape[0]))
+    zero = m == 0
+    out[row[zero]] = alm[:, zero].real.T
+    out[row[~zero]] = np.sqrt(2.0) * alm[:, ~zero].real.T
+    out[(l * (l + 1) - m)[~zero]] = -np.sqrt(2.0) * alm[:, ~zero].imag.T
+    return out
+
+
+def alm_from_real(coeffs: np.ndarray, order: int) -> np.ndarray:
+    """ducc0's complex alm (C, nalm) of lmax = order-1 from real coefficients (>= order^2, C)."""
+    l, m, row = _alm_index(order - 1)
+    zero = m == 0
+    alm = np.zeros((coeffs.shape[1], l.size), dtype=np.complex128)
+    alm[:, zero] = coeffs[row[zero]].T
+    alm[:, ~zero] = (coeffs[row[~zero]] - 1j * coeffs[(l * (l + 1) - m)[~zero]]).T / np.sqrt(2.0)
+    return alm
+
+
+def zonal_scale(alm: np.ndarray, factors: np.ndarray) -> np.ndarray:
+    """alm (C, nalm) times a factor per band l (factors of length lmax+1)."""
+    l, _, _ = _alm_index(factors.size - 1)
+    return alm * factors[l].astype(alm.real.dtype)
+
+
+def texel_sums_alm(env: np.ndarray, lmax: int, epsilon: float = EPSILON) -> np.ndarray:
+    """ducc0 alm (C, nalm) of sum_i L_i conj(Y_lm(w_i)) W_i over the disk texels of an angle map (N, N, C);
+    in single precision where epsilon allows it (ducc0: above 1e-6)."""
+    n = env.shape[0]
+    inside = _disk_mask(n)
+    dtype = np.float32 if epsilon > 1e-6 else np.float64
+    weighted = (np.asarray(env, dtype=np.float64)[inside] * _solid_angles(n)[:, None]).T.astype(dtype)
+    loc = disk_locations(n)
+    return np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=lmax, loc=loc,
+                                                    epsilon=epsilon, nthreads=threads())[0] for ch in weighted])
+
+
+def texel_sums(env: np.ndarray, order: int) -> np.ndarray:
+    """SH coefficients (order^2, C) of an angle map (N, N, C): the exact sums over its disk texels with
+    their solid angles (to EPSILON), as sh.sh_coefficients defines them."""
+    return real_from_alm(texel_sums_alm(env, order - 1), order)
+
+
+def synthesise_at(alm: np.ndarray, lmax: int, loc: np.ndarray, epsilon: float = EPSILON) -> np.ndarray:
+    """(K, C) values of the SH series alm (C, nalm) at locations loc (K, 2)."""
+    return np.stack([_SHT.synthesis_general(alm=np.ascontiguousarray(a[None]), spin=0, lmax=lmax, loc=loc,
+                                            epsilon=epsilon, nthreads=threads())[0] for a in alm], axis=1)
+
+
+def synthesise_cc_grid(alm: np.ndarray, lmax: int, n_theta: int, n_phi: int, out: np.ndarray | None = None) -> np.ndarray:
+    """(C, n_theta, n_phi) values on the grid theta_r = r pi/(n_theta-1), phi_c = 2 pi c/n_phi
+    (ducc0's Clenshaw-Curtis geometry: the grid sh.sh_synthesis_grid has always used), written into out."""
+    if out is None:
+        out = np.empty((alm.shape[0], n_theta, n_phi), dtype=np.float32 if alm.dtype == np.complex64 else np.float64)
+    for a, plane in zip(alm, out):
+        _SHT.synthesis_2d(alm=np.ascontiguousarray(a[None]), spin=0, lmax=lmax, geometry="CC", ntheta=n_theta,
+                          nphi=n_phi, nthreads=threads(), map=plane[None])
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def bands_for_exponent(exponent: float, truncation: float = TRUNCATION) -> int:
+    """Bands 0..b-1 that carry the Phong lobe's zonal coefficients down to `truncation`:
+    kappa_l ~ exp(-l^2 / 2s) for large s, but only ~ l^-2.5 for s = 1 (the kink at the horizon: about
+    300 bands); at least MIN_BANDS."""
+    guess = int(np.ceil(np.sqrt(2.0 * exponent * np.log(1.0 / truncation)))) + 2
+    kappa = phong_zonal_coefficients(exponent, max(guess, MAX_BANDS_SEARCH) + 1)
+    above = np.flatnonzero(np.abs(kappa) >= truncation)
+    return max(MIN_BANDS, int(above[-1]) + 1)
+
+
+@functools.lru_cache(maxsize=64)
+def _weight_map(n: int, exponent: float, bands: int) -> np.ndarray:
+    """The lobe sum of the texel weights at every disk texel (the normaliser), through the same
+    truncation and grid as the radiance, per (size, exponent): it depends on nothing else, so repeated
+    bakes at one size pay for it once."""
+    alm = zonal_scale(texel_sums_alm(np.ones((n, n, 1)), bands - 1, FAST_EPSILON), phong_zonal_coefficients(exponent, bands))
+    size = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
+    grid = synthesise_cc_grid(alm, bands - 1, *size)
+    values = np.zeros((n * n, 1))
+    cubic_lookup_into(values, np.arange(len(disk_locations(n))), grid.reshape(1, -1), *size, *grid_coordinates(n, *size),
+                      np.ones(len(disk_locations(n))))
+    values = values[: len(disk_locations(n)), 0].copy()
+    values.setflags(write=False)
+    return values
+
+
+def sht_prepare(env: np.ndarray, exponents: Sequence[float]) -> tuple[np.ndarray, int]:
+    """The probe's alm (3, nalm) at the largest bandlimit the exponents need, and that lmax."""
+    lmax = max(bands_for_exponent(s) for s in exponents) - 1
+    return texel_sums_alm(np.asarray(env)[..., :3], lmax, FAST_EPSILON), lmax
+
+
+@functools.lru_cache(maxsize=16)
+def _solid_angles(n: int) -> np.ndarray:
+    w = anglemap_solid_angles(n)[_disk_mask(n)]
+    w.setflags(write=False)
+    return w
+
+
+@functools.lru_cache(maxsize=16)
+def _disk_index(n: int) -> np.ndarray:
+    index = np.flatnonzero(_disk_mask(n))
+    index.setflags(write=False)
+    return index
+
+
+@functools.lru_cache(maxsize=16)
+def _disk_mask(n: int) -> np.ndarray:
+    mask = anglemap_disk_mask(n)
+    mask.setflags(write=False)
+    return mask
+
+
+@functools.lru_cache(maxsize=32)
+def grid_coordinates(n: int, n_theta: int, n_phi: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fractional (row, column) of every disk texel of an N x N angle map on the Clenshaw-Curtis grid
+    (n_theta, n_phi) (kept: every bake at that size reuses them)."""
+    loc = disk_locations(n)
+    rows = loc[:, 0] / np.pi * (n_theta - 1)
+    cols = loc[:, 1] / (2 * np.pi) * n_phi
+    for a in (rows, cols):
+        a.setflags(write=False)
+    return rows, cols
+
+
+def grid_size(bands: int) -> tuple[int, int]:
+    """(n_theta, n_phi) of the grid an exponent's map is synthesised on: GRID_SAMPLES_PER_BAND samples
+    per band in theta of the bands above GRID_TRUNCATION, so that the bicubic lookup's error stays far below
+    the truncation's; for the irradiance lobe's long tail of small bands, two samples per band (measured:
+    as accurate as four, at a quarter of the grid)."""
+    n_theta = GRID_SAMPLES_PER_BAND * bands + 1
+    return n_theta, 2 * (n_theta - 1)
+
+
+def sht_map(env: np.ndarray, prepared: tuple[np.ndarray, int], exponent: float) -> np.ndarray:
+    """The map (N, N, 3) float32 of one exponent from sht_prepare's alm."""
+    alm, lmax = prepared
+    n = env.shape[0]
+    bands = min(bands_for_exponent(exponent), lmax + 1)
+    kappa = phong_zonal_coefficients(exponent, bands)
+    # The alm of a smaller lmax are not a prefix in healpy's m-major layout: pick them out.
+    l, m, _ = _alm_index(lmax)
+    keep = (l < bands) & (m < bands)
+    size = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
+    grid = synthesise_cc_grid(zonal_scale(alm[:, keep], kappa), bands - 1, *size)
+    out = np.zeros((n * n, 3), dtype=np.float32)
+    cubic_lookup_into(out, _disk_index(n), grid.reshape(3, -1), *size, *grid_coordinates(n, *size),
+                      _weight_map(n, float(exponent), bands))
+    return out.reshape(n, n, 3)
+
+
+def sht_maps(env: np.ndarray, exponents: Sequence[float]) -> np.ndarray:
+    """Maps (E, N, N, 3) float32 for the exponents."""
+    prepared = sht_prepare(env, exponents)
+    return np.stack([sht_map(env, prepared, s) for s in exponents])
+
+
+def _source_texels(source: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(values (M, 3), loc (M, 2), solid angles (M,)) of every texel of an angle map's disk or an equirect."""
+    if detect_layout(source, "source") == "anglemap":
+        n = source.shape[0]
+        return np.asarray(source, dtype=np.float64)[_disk_mask(n)][:, :3], disk_locations(n), _solid_angles(n)
+    h = source.shape[0]
+    theta, phi = sh_angles(equirect_directions(h).reshape(-1, 3))
+    return (np.asarray(source, dtype=np.float64).reshape(-1, source.shape[2])[:, :3], np.stack([theta, phi], axis=1),
+            equirect_solid_angles(h).ravel())
+
+
+def sht_maps_from_source(source: np.ndarray, n: int, exponents: Sequence[float]) -> np.ndarray:
+    """Maps (E, n, n, 3) float32 from a source at its own resolution and layout (angle map or equirect):
+    the texel sums run over the source's texels, so nothing is resampled before the lobe averages (a
+    small bright source keeps its energy); the normaliser is the source's own lobe sum of weights."""
+    values, loc, weights = _source_texels(source)
+    lmax = max(bands_for_exponent(s) for s in exponents) - 1
+    weighted = np.concatenate([values * weights[:, None], weights[:, None]], axis=1).T.astype(np.float32)
+    alm = np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=lmax, loc=loc,
+                                                   epsilon=FAST_EPSILON, nthreads=threads())[0] for ch in weighted])
+    l, m, _ = _alm_index(lmax)
+    maps = np.zeros((len(exponents), n * n, 3), dtype=np.float32)
+    ones = np.ones(len(disk_locations(n)))
+    for k, s in enumerate(exponents):
+        bands = bands_for_exponent(s)
+        keep = (l < bands) & (m < bands)
+        size = grid_size(max(bands // 2, bands_for_exponent(s, GRID_TRUNCATION)))
+        grid = synthesise_cc_grid(zonal_scale(alm[:, keep], phong_zonal_coefficients(s, bands)), bands - 1, *size)
+        den = np.zeros((len(ones), 1))
+        cubic_lookup_into(den, np.arange(len(ones)), grid[3:].reshape(1, -1), *size, *grid_coordinates(n, *size), ones)
+        cubic_lookup_into(maps[k], _disk_index(n), grid[:3].reshape(3, -1), *size, *grid_coordinates(n, *size), den[:, 0])
+    return maps.reshape(len(exponents), n, n, 3)

@@ -1,0 +1,203 @@
+"""`sht` and `sh` against a plain ducc0 script and against brute force (prints figures; not a test).
+
+    python benchmarks/bench_sht.py [--assets city,interior,sunrise] [--texels 300] [--fine 2048] [--quick]
+
+Per asset (512² angle map of the bundled equirect, nine exponents):
+- times, best of 3, with their ratios measured in the same run: `sht` (a bake: shared work + nine maps),
+  the peer (a ducc0 script at L = 255: the angle map resampled onto a Gauss-Legendre grid, one analysis,
+  nine kernel products and syntheses, bilinear lookups at the texels), `fast`;
+- errors (mean/max %, README: Conventions) of `sht` and the peer against brute force at --texels random
+  disk texels plus the patch around the brightest texel, from the 512² source and from a --fine² angle map
+  of the same equirect (4x finer: what the 512² source itself loses);
+- `sh` at order 256 (coefficients + nine maps) against one ducc0 analysis and nine syntheses of its grid;
+- `sh` with each window: mean error against brute force at orders 8..256, and whether it falls with order.
+"""
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import ducc0
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from maps_accuracy import reference_texels  # noqa: E402
+from timing import best_of  # noqa: E402
+
+from arsim.core.assets import assets_dir  # noqa: E402
+from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles  # noqa: E402
+from arsim.core.hdr_io import read_hdr  # noqa: E402
+from arsim.core.resample import to_layout  # noqa: E402
+from arsim.evaluate.metrics import map_error  # noqa: E402
+from arsim.lighting.accurate import lobe_average_at  # noqa: E402
+from arsim.lighting.methods import MapParameters, bake  # noqa: E402
+from arsim.lighting.phong import phong_zonal_coefficients  # noqa: E402
+from arsim.lighting.sh import WINDOWS, synthesis_grid_size  # noqa: E402
+from arsim.lighting.sht import sh_angles, sht_maps_from_source  # noqa: E402
+
+EXPONENTS = [1, 2, 10, 20, 40, 80, 160, 320, 1280]
+SHT = ducc0.sht.experimental
+PEER_LMAX = 255
+
+
+def peer(env: np.ndarray, exponents) -> np.ndarray:
+    """What a short script on ducc0 does: resample the angle map onto the GL grid of L = 255, analyse,
+    multiply by the lobe's zonal coefficients, synthesise on the same grid, look the texels up bilinearly."""
+    n = env.shape[0]
+    lmax = PEER_LMAX
+    ntheta, nphi = lmax + 1, 2 * lmax + 2
+    theta = np.arccos(np.polynomial.legendre.leggauss(ntheta)[0])[::-1]  # GL nodes, north to south
+    phi = 2 * np.pi * np.arange(nphi) / nphi
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    # The SH frame of sh.py: pole +z, phi = atan2(d_y, -d_x); angle map s = 0.5 + d_x r/2, t = 0.5 + d_y r/2.
+    dx, dy = -np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph)
+    r = th / (np.pi * np.maximum(np.sin(th), 1e-12))
+    col = ((0.5 + dx * r / 2) * n - 0.5).astype(np.float32)
+    row = ((1 - (0.5 + dy * r / 2)) * n - 0.5).astype(np.float32)
+    grid = cv2.remap(env.astype(np.float32), col, row, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    alm = [SHT.analysis_2d(map=grid[None, :, :, c].astype(np.float64), spin=0, lmax=lmax, geometry="GL", nthreads=0)
+           for c in range(3)]
+    loc_t, loc_p = sh_angles(anglemap_directions(n))
+    map_row = np.interp(loc_t, theta, np.arange(ntheta)).astype(np.float32)
+    map_col = (loc_p / (2 * np.pi) * nphi).astype(np.float32)
+    l = np.concatenate([np.arange(m, lmax + 1) for m in range(lmax + 1)])
+    out = np.zeros((len(exponents), n, n, 3), dtype=np.float32)
+    inside = anglemap_disk_mask(n)
+    for k, s in enumerate(exponents):
+        kappa = phong_zonal_coefficients(s, lmax + 1)[l]
+        for c in range(3):
+            m = SHT.synthesis_2d(alm=alm[c] * kappa, spin=0, lmax=lmax, geometry="GL", ntheta=ntheta, nphi=nphi,
+                                 nthreads=0)[0].astype(np.float32)
+            m = np.concatenate([m, m[:, :1]], axis=1)  # wrap in longitude
+            out[k, :, :, c] = cv2.remap(m, map_col, map_row, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out[k][~inside] = 0
+    return out
+
+
+def brute_force(env: np.ndarray, exponents, directions: np.ndarray) -> np.ndarray:
+    """(K, E, 3) normalised lobe averages over every disk texel of env (any size), direction by direction."""
+    n = env.shape[0]
+    inside = anglemap_disk_mask(n)
+    dirs = anglemap_directions(n)[inside]
+    w = anglemap_solid_angles(n)[inside]
+    lw = np.concatenate([env[inside].astype(np.float64) * w[:, None], w[:, None]], axis=1)
+    out = np.empty((len(directions), len(exponents), 3))
+    for i, d in enumerate(directions):
+        c = np.maximum(dirs @ d, 0.0)
+        keep = c > 0
+        c, part = c[keep], lw[keep]
+        for k, s in enumerate(exponents):
+            sums = (c**s) @ part
+            out[i, k] = sums[:3] / sums[3]
+    return out
+
+
+def errors(reference: np.ndarray, maps: np.ndarray, texels: np.ndarray) -> list:
+    return [map_error(reference[:, k], maps[k].reshape(-1, 3)[texels]) for k in range(len(EXPONENTS))]
+
+
+def row(errs) -> str:
+    return "  ".join(f"{e.mean_percent:6.3f}/{e.max_percent:5.2f}" for e in errs)
+
+
+def timed_best(repeat, fn):
+    best, result = None, None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = fn()
+        t = time.perf_counter() - start
+        best = t if best is None else min(best, t)
+    return best, result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--assets", default="city,interior,sunrise")
+    parser.add_argument("--texels", type=int, default=300)
+    parser.add_argument("--fine", type=int, default=2048)
+    parser.add_argument("--fine-texels", type=int, default=40,
+                        help="random texels for the fine reference (plus the bright patch): it costs (fine)² per texel")
+    parser.add_argument("--quick", action="store_true", help="skip the fine reference and the window sweep")
+    parser.add_argument("--skip-windows", action="store_true", help="skip the window sweep and mc")
+    args = parser.parse_args()
+    header = "  ".join(f"{f's={s}':>12}" for s in EXPONENTS)
+    worst = {"sht": [0.0, 0.0], "sht fine": [0.0, 0.0], "sht equirect fine": [0.0, 0.0]}
+    for name in args.assets.split(","):
+        source = read_hdr(assets_dir() / "envmaps" / f"{name}.exr")
+        env = to_layout(source, "anglemap", 512)
+        bake(env, EXPONENTS, "sht")  # warm: the per-size caches (texel locations, normalisers, lookups)
+        peer(env, EXPONENTS)
+        sht_s, sht_bake = timed_best(3, lambda: bake(env, EXPONENTS, "sht"))
+        peer_s, peer_maps = timed_best(3, lambda: peer(env, EXPONENTS))
+        fast_s = best_of(1, lambda: bake(env, EXPONENTS, "fast"))
+        print(f"\n{name}: sht {sht_s:.3f} s, peer (ducc0 L=255 script) {peer_s:.3f} s, fast {fast_s:.3f} s; "
+              f"peer/sht = {peer_s / sht_s:.2f}x, fast/sht = {fast_s / sht_s:.2f}x")
+        texels = reference_texels(env, args.texels)
+        directions = anglemap_directions(512).reshape(-1, 3)[texels]
+        reference = lobe_average_at(env, EXPONENTS, directions)
+        print(f"  {'mean/max % at ' + str(len(texels)) + ' texels':<30}{header}")
+        e = errors(reference, sht_bake.maps, texels)
+        print(f"  {'sht vs brute force 512²':<30}{row(e)}")
+        worst["sht"] = [max(worst["sht"][0], max(x.mean_percent for x in e)), max(worst["sht"][1], max(x.max_percent for x in e))]
+        print(f"  {'peer vs brute force 512²':<30}{row(errors(reference, peer_maps, texels))}")
+        # sht from the equirect itself (its own 1024 x 512 texels): nothing resampled before the sums.
+        src_s, src_maps = timed_best(3, lambda: sht_maps_from_source(source, 512, EXPONENTS))
+        e = errors(reference, src_maps, texels)
+        print(f"  {'sht from equirect vs 512²':<30}{row(e)}   ({src_s:.3f} s)")
+        if not args.quick:
+            fine = to_layout(source, "anglemap", args.fine)
+            start = time.perf_counter()
+            fine_texels = reference_texels(env, args.fine_texels)
+            fine_ref = brute_force(fine, EXPONENTS, anglemap_directions(512).reshape(-1, 3)[fine_texels])
+            e = errors(fine_ref, sht_bake.maps, fine_texels)
+            print(f"  {f'sht vs brute force {args.fine}²':<30}{row(e)}   (at {len(fine_texels)} texels; "
+                  f"reference {time.perf_counter() - start:.0f} s)")
+            worst["sht fine"] = [max(worst["sht fine"][0], max(x.mean_percent for x in e)),
+                                 max(worst["sht fine"][1], max(x.max_percent for x in e))]
+            print(f"  {f'peer vs brute force {args.fine}²':<30}{row(errors(fine_ref, peer_maps, fine_texels))}")
+            e = errors(fine_ref, src_maps, fine_texels)
+            print(f"  {f'sht equirect vs {args.fine}²':<30}{row(e)}")
+            worst["sht equirect fine"] = [max(worst["sht equirect fine"][0], max(x.mean_percent for x in e)),
+                                          max(worst["sht equirect fine"][1], max(x.max_percent for x in e))]
+
+        # sh at order 256 against what ducc0 itself needs for one analysis and nine syntheses of its grid.
+        params = MapParameters(sh_order=256)
+        sh_s = best_of(3, lambda: bake(env, EXPONENTS, "sh", params))
+        n_theta, n_phi = synthesis_grid_size(256)
+        grid = np.random.default_rng(0).random((1, n_theta, n_phi))
+
+        def ducc_alone():
+            alms = [SHT.analysis_2d(map=grid, spin=0, lmax=255, geometry="CC", nthreads=0) for _ in range(3)]
+            for _ in EXPONENTS:
+                for a in alms:
+                    SHT.synthesis_2d(alm=a, spin=0, lmax=255, geometry="CC", ntheta=n_theta, nphi=n_phi, nthreads=0)
+
+        ducc_s = best_of(3, ducc_alone)
+        print(f"  sh order 256 (coefficients + nine maps): {sh_s:.2f} s; ducc0 alone (3 analyses + 27 syntheses of "
+              f"its {n_theta}x{n_phi} grid): {ducc_s:.2f} s; ratio {sh_s / ducc_s:.2f}x")
+
+        if name == args.assets.split(",")[0] and not args.skip_windows:
+            sh64 = bake(env, EXPONENTS, "sh", MapParameters(sh_order=64))
+            mc = bake(env, EXPONENTS, "mc", MapParameters(samples=64))
+            print(f"  mc, 64 samples: {mc.seconds_total:.1f} s; sh order 64: {sh64.seconds_total:.2f} s; "
+                  f"mc/sh64 = {mc.seconds_total / sh64.seconds_total:.1f}x")
+
+        if not args.quick and not args.skip_windows:
+            orders = [8, 16, 32, 64, 128, 256]
+            print(f"  sh mean error % against brute force 512², by window and order {orders}:")
+            for window in WINDOWS:
+                means = np.array([[x.mean_percent for x in errors(reference, bake(env, EXPONENTS, "sh", MapParameters(
+                    sh_order=o, sh_window=window)).maps, texels)] for o in orders])  # (orders, exponents)
+                falls = [bool(np.all(np.diff(means[:, k]) <= 1e-9)) for k in range(len(EXPONENTS))]
+                not_falling = [s for s, f in zip(EXPONENTS, falls) if not f]
+                print(f"    {window:<8} " + "  ".join(f"s={s}: " + "/".join(f"{v:.3g}" for v in means[:, k])
+                                                    for k, s in enumerate(EXPONENTS)))
+                print(f"    {'':<8} falls monotonically at every exponent: {not not_falling}"
+                      + (f" (not at s = {not_falling})" if not_falling else ""))
+    print("\nworst over assets and exponents, mean/max %: " + ", ".join(f"{k} {v[0]:.3f}/{v[1]:.2f}" for k, v in worst.items()))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,157 @@
+"""`sht` (ducc0's fast SH transforms) and `sh` on them: accuracy against brute force, agreement with the
+ring sums that preceded them, the conversions between ducc0's alm and the real SH, the windows."""
+
+import numpy as np
+import pytest
+
+from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, equirect_directions, equirect_solid_angles
+from arsim.core.errors import ArsimError
+from arsim.core.hdr_io import read_hdr
+from arsim.core.resample import to_layout
+from arsim.evaluate.metrics import map_error
+from arsim.lighting.accurate import accurate_maps
+from arsim.lighting.mc import mc_maps
+from arsim.lighting.methods import MapParameters, bake
+from arsim.lighting.phong import phong_zonal_coefficients
+from arsim.lighting.sh import (GRID_MAX_ORDER, MAX_ORDER, WINDOWS, _disk_sampler, sh_coefficients, sh_evaluate, sh_maps,
+                               sh_synthesis_grid, sh_window, synthesis_grid_size)
+from arsim.lighting.sht import (TRUNCATION, alm_from_real, bands_for_exponent, real_from_alm, sht_maps,
+                               sht_maps_from_source)
+from tests.conftest import ENVMAPS
+
+EXPONENTS = [1, 2, 10, 20, 40, 80, 160, 320, 1280]
+
+
+@pytest.fixture(scope="module")
+def bright64():
+    """A real probe at 64² with a small source far brighter than the rest (where truncation shows)."""
+    env = to_layout(read_hdr(ENVMAPS[1]), "anglemap", 64).astype(np.float64)
+    env[20, 41] += 2000.0
+    return env
+
+
+def test_sht_maps_meet_the_targets_against_brute_force(bright64):
+    inside = anglemap_disk_mask(64)
+    exact = accurate_maps(bright64, EXPONENTS)
+    maps = sht_maps(bright64, EXPONENTS)
+    assert maps.dtype == np.float32 and np.all(maps[:, ~inside] == 0)
+    for k, s in enumerate(EXPONENTS):
+        e = map_error(exact[k][inside], maps[k][inside])
+        assert e.mean_percent <= 0.3 and e.max_percent <= 3.0, (s, e)
+
+
+def test_sht_is_a_method_and_rotates_with_the_probe(bright64):
+    maps = bake(bright64, [1, 80], "sht").maps
+    turned = bake(np.ascontiguousarray(np.rot90(bright64)), [1, 80], "sht").maps
+    np.testing.assert_allclose(turned, np.rot90(maps, axes=(1, 2)), rtol=1e-5, atol=1e-6 * maps.max())
+
+
+def test_bands_carry_the_lobe_down_to_the_truncation():
+    previous = 0
+    for s in EXPONENTS:
+        bands = bands_for_exponent(s)
+        kappa = phong_zonal_coefficients(s, bands + 200)
+        assert np.all(np.abs(kappa[bands:]) < TRUNCATION)
+        if s >= 10:  # narrower lobes need more bands
+            assert bands >= previous
+            previous = bands
+    # ... but the kink of max(0, cos)^s at the horizon decays like l^-(s+1.5): the smallest s need the most
+    assert bands_for_exponent(1) > bands_for_exponent(2) > bands_for_exponent(10)
+
+
+def test_alm_conversion_round_trips():
+    order = 9
+    coeffs = np.random.default_rng(0).normal(size=(order * order, 2))
+    np.testing.assert_allclose(real_from_alm(alm_from_real(coeffs, order), order), coeffs, atol=1e-15)
+
+
+@pytest.mark.parametrize("order", [1, 6, 16, 17, 40])
+def test_sh_matches_the_ring_sums_within_1e_6(order):
+    """The coefficients and maps of `sh` against the NumPy ring sums and evaluations they replaced
+    (direct at the texels up to order 16, the bilinear grid beyond)."""
+    rng = np.random.default_rng(order)
+    n = 32
+    env = rng.random((n, n, 3)) * np.array([1.0, 2.0, 3.0])
+    env[9, 20] = 500.0
+    inside = anglemap_disk_mask(n)
+    reference = sh_coefficients(env, order, compiled=False)
+    coeffs = sh_coefficients(env, order)
+    assert np.abs(coeffs - reference).max() <= 1e-9 * np.abs(reference).max()
+    exponents = [1, 20, 1280]
+    kappas = np.stack([phong_zonal_coefficients(s, order) for s in exponents])
+    if order <= 16:
+        old = sh_evaluate(reference, kappas, anglemap_directions(n)[inside])
+    else:
+        size = synthesis_grid_size(order)
+        grid = sh_synthesis_grid(reference, kappas, *size, compiled=False)
+        flat = _disk_sampler(n, *size)(grid.reshape((-1,) + grid.shape[2:]))
+        old = flat.reshape(flat.shape[0], len(exponents), -1).transpose(1, 0, 2)
+    new = sh_maps(env, exponents, order)
+    for k in range(len(exponents)):
+        np.testing.assert_allclose(new[k][inside], old[k], rtol=1e-6, atol=1e-6 * np.abs(old[k]).max())
+
+
+def test_sh_beyond_the_grid_orders_is_evaluated_at_the_texels():
+    n, order = 16, GRID_MAX_ORDER + 8
+    env = np.random.default_rng(1).random((n, n, 3))
+    inside = anglemap_disk_mask(n)
+    coeffs = sh_coefficients(env, order)
+    kappas = phong_zonal_coefficients(1280, order)[None]
+    direct = sh_evaluate(coeffs, kappas, anglemap_directions(n)[inside])[0]
+    np.testing.assert_allclose(sh_maps(env, [1280], order, coeffs=coeffs)[0][inside], direct, rtol=1e-6,
+                               atol=1e-6 * np.abs(direct).max())
+
+
+def test_sh_order_range_and_windows_are_checked():
+    MapParameters(sh_order=MAX_ORDER).check()
+    assert MAX_ORDER == 1024
+    for bad in (MapParameters(sh_order=MAX_ORDER + 1), MapParameters(sh_window="box"),
+                MapParameters(sh_order=GRID_MAX_ORDER + 1, sh_faithful=True)):
+        with pytest.raises(ArsimError):
+            bad.check()
+
+
+@pytest.mark.parametrize("window", WINDOWS)
+def test_windows_keep_the_mean_and_fall_with_band(window):
+    w = sh_window(window, 20)
+    assert w[0] == 1.0 and np.all(np.diff(w) <= 0) and np.all(w > 0)
+    env = np.full((64, 64, 3), 1.5)  # 64²: as test_lighting holds sh's constant
+    maps = bake(env, [1, 40], "sh", MapParameters(sh_order=20, sh_window=window)).maps
+    np.testing.assert_allclose(maps[:, anglemap_disk_mask(64)], 1.5, rtol=1e-3)
+
+
+def test_windows_reduce_ringing_around_a_bright_source(bright64):
+    """Plain truncation rings: negative lobes round a small bright source. Hann and Sloan's windows
+    shrink the most negative value of the map (the ringing Sloan's tricks remove)."""
+    plain = sh_maps(bright64, [1280], 12)[0][..., 0].min()
+    assert plain < 0
+    for window in ("hann", "sloan"):
+        assert sh_maps(bright64, [1280], 12, window=window)[0][..., 0].min() > 0.5 * plain
+
+
+@pytest.mark.parametrize("filtered", [True, False])
+def test_mc_compiled_equals_its_numpy_path(bright64, filtered):
+    """mc's compiled samples: the same uniforms, directions, levels and lookups as the NumPy path."""
+    env = bright64[::2, ::2].copy()
+    fast = mc_maps(env, [1, 20, 1280], 16, seed=3, filtered=filtered)
+    slow = mc_maps(env, [1, 20, 1280], 16, seed=3, filtered=filtered, compiled=False)
+    np.testing.assert_allclose(fast, slow, rtol=1e-5, atol=1e-6 * slow.max())
+
+
+def test_sht_from_the_source_itself(bright64):
+    """From an angle map it is `sht`; from an equirect it sums the equirect's own texels, and agrees with
+    brute force over those texels."""
+    np.testing.assert_allclose(sht_maps_from_source(bright64, 64, [1, 80]), sht_maps(bright64, [1, 80]), rtol=1e-4,
+                               atol=1e-5 * bright64.max())
+    equirect = read_hdr(ENVMAPS[1])[::8, ::8].astype(np.float64)  # 64 x 128
+    equirect[20, 70] += 500.0
+    maps = sht_maps_from_source(equirect, 32, [1, 80])
+    inside = anglemap_disk_mask(32)
+    dirs = anglemap_directions(32)[inside]
+    src_dirs = equirect_directions(64).reshape(-1, 3)
+    w = equirect_solid_angles(64).ravel()
+    for k, s in enumerate([1, 80]):
+        lobe = np.maximum(dirs @ src_dirs.T, 0.0) ** s * w
+        exact = (lobe @ equirect.reshape(-1, 3)) / lobe.sum(axis=1)[:, None]
+        e = map_error(exact, maps[k][inside])
+        assert e.mean_percent <= 0.3 and e.max_percent <= 3.0, (s, e)
