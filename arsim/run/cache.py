@@ -13,12 +13,12 @@ stage compute it once.
 
 from __future__ import annotations
 
-import ast
 import contextlib
 import dataclasses
 import hashlib
 import json
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -119,30 +119,44 @@ def _module_file(name: str) -> Path | None:
     return None
 
 
-def _imports(path: Path) -> set[str]:
+_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+(arsim[\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n]*)|import[ \t]+(arsim[\w.]*))", re.M)
+_imports_of: dict[tuple, frozenset] = {}
+
+
+def _imports(path: Path) -> frozenset[str]:
     """The arsim modules a source file imports, anywhere in it (functions' imports too); `from package
-    import name` counts the module package.name where there is one, else the whole package."""
+    import name` counts the module package.name where there is one, else the whole package (a package's
+    names may be lazy: any of its modules)."""
+    stat = path.stat()
+    tag = (str(path), stat.st_size, stat.st_mtime_ns)
+    if tag in _imports_of:
+        return _imports_of[tag]
     found = set()
-    for node in ast.walk(ast.parse(path.read_bytes(), str(path))):
-        if isinstance(node, ast.Import):
-            found |= {a.name for a in node.names if a.name.split(".")[0] == "arsim"}
-        elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "arsim":
-            for a in node.names:
-                sub = f"{node.module}.{a.name}"
-                if _module_file(sub) is not None:
-                    found.add(sub)
-                else:
-                    found.add(node.module)
-                    file = _module_file(node.module)
-                    if file is not None and file.name == "__init__.py":  # a package's lazy names: all of it
-                        found |= {f"{node.module}.{p.stem}" for p in file.parent.glob("*.py") if p.stem != "__init__"}
-    return found
+    for module, names, plain in _IMPORT.findall(path.read_text(encoding="utf-8")):
+        if plain:
+            found.add(plain)
+            continue
+        for name in re.split(r"[\s,()]+", names.split("#")[0] if not names.startswith("(") else names):
+            name = name.strip()
+            if not name or name == "as" or not name.isidentifier():
+                continue
+            sub = f"{module}.{name}"
+            if _module_file(sub) is not None:
+                found.add(sub)
+            else:
+                found.add(module)
+                file = _module_file(module)
+                if file is not None and file.name == "__init__.py" and module != "arsim":  # (arsim's: the version)
+                    found |= {f"{module}.{p.stem}" for p in file.parent.glob("*.py") if p.stem != "__init__"}
+    _imports_of[tag] = frozenset(found)
+    return _imports_of[tag]
 
 
-def code_digest(modules: tuple[str, ...], files: tuple[str, ...] = ()) -> str:
-    """The sha256 of the source of the modules a stage runs: the entry modules and every arsim module they
-    import, transitively (module by module); plus files (paths under arsim/) hashed without following their
-    imports (the modules that orchestrate the stages: the parts a stage runs are among its entry modules)."""
+def code_files(modules: tuple[str, ...], files: tuple[str, ...] = ()) -> list[str]:
+    """The source files (paths under arsim/) of the modules a stage runs: the entry modules and every arsim
+    module they import, transitively (module by module), arsim/__init__.py (the version); plus files, taken
+    without following their imports (the modules that orchestrate the stages: the parts a stage runs are
+    among its entry modules)."""
     seen: dict[str, Path] = {}
     todo = list(modules)
     while todo:
@@ -152,9 +166,13 @@ def code_digest(modules: tuple[str, ...], files: tuple[str, ...] = ()) -> str:
             continue
         seen[name] = file
         todo += sorted(_imports(file) - set(seen))
-    paths = sorted({p.relative_to(PACKAGE).as_posix() for p in seen.values()} | set(files) | {"__init__.py"})
+    return sorted({p.relative_to(PACKAGE).as_posix() for p in seen.values()} | set(files) | {"__init__.py"})
+
+
+def code_digest(modules: tuple[str, ...], files: tuple[str, ...] = ()) -> str:
+    """The sha256 of code_files' source."""
     h = hashlib.sha256()
-    for rel in paths:
+    for rel in code_files(modules, files):
         h.update(rel.encode() + b"\0" + (PACKAGE / rel).read_bytes() + b"\0")
     return h.hexdigest()
 

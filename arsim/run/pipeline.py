@@ -95,16 +95,49 @@ STAGE_CODE = {
     "report": ("arsim.run.report", "arsim.evaluate.estimates", "arsim.evaluate.session", "arsim.scenario.loader"),
 }
 RUN_FILES = ("run/pipeline.py", "run/stages.py", "run/cache.py")
-# [capture]'s settings of the capture alone; the others shape the sweep (the recording's key)
+# [capture]'s settings of the capture alone, and [ar]'s of the AR session alone; the others shape the recording
 CAPTURE_ONLY = ("align_every", "refine", "capture_size")
+AR_SESSION_ONLY = ("detector", "fusion")
 
 
 def recording_settings(scenario: Scenario) -> dict:
     """What the recording depends on: [run] seed, [environment] (the map file by content), [device], [capture]'s
     sweep settings and [ar]."""
     sweep = {k: v for k, v in settings_digest(scenario.capture).items() if k not in CAPTURE_ONLY}
+    ar = {k: v for k, v in settings_digest(scenario.ar).items() if k not in AR_SESSION_ONLY}
     return {"seed": scenario.run.seed, "environment": settings_digest(scenario.environment),
-            "device": settings_digest(scenario.device), "capture": sweep, "ar": settings_digest(scenario.ar)}
+            "device": settings_digest(scenario.device), "capture": sweep, "ar": ar}
+
+
+def recording_key(scenario: Scenario) -> str:
+    return key_of("recording", {"settings": recording_settings(scenario), "code": code_digest(STAGE_CODE["recording"])})
+
+
+def maps_plan(objects: list, r) -> tuple[dict[str, list[float]], list[str], list[float]]:
+    """The maps a run bakes: per method the exponents its objects need, every method (those and [render]
+    methods), and every exponent."""
+    from arsim.render.session import maps_needed
+
+    needed = maps_needed(objects, r.method)
+    return needed, list(dict.fromkeys([*needed, *r.methods])), sorted({s for ss in needed.values() for s in ss})
+
+
+def stage_keys(scenario: Scenario, source: str, content: str, objects: list) -> dict[str, str]:
+    """The keys of the stages after the recording: content is the recording's content hash (recording_digest),
+    objects the scenario's (render.content.scene_objects), whose materials name the maps baked."""
+    r = scenario.render
+    _, methods, exponents = maps_plan(objects, r)
+    code = {name: code_digest(modules, RUN_FILES) for name, modules in STAGE_CODE.items() if name != "recording"}
+    keys = {"capture": key_of("capture", {"recording": content, "code": code["capture"]})}
+    keys["estimates"] = key_of("estimates", {"capture": keys["capture"], "code": code["estimates"]})
+    keys["maps"] = key_of("maps", {"capture": keys["capture"], "map_size": r.map_size,
+                                   "methods": methods, "exponents": exponents, "code": code["maps"]})
+    keys["session"] = key_of("session", {"maps": keys["maps"], "estimates": keys["estimates"], "render": settings_digest(r),
+                                         "ar": {k: getattr(scenario.ar, k) for k in AR_SESSION_ONLY},
+                                         "budget_ms": scenario.profile.budget_ms, "code": code["session"]})
+    keys["report"] = key_of("report", {"session": keys["session"], "scenario": settings_digest(scenario), "source": source,
+                                       "code": code["report"]})
+    return keys
 
 
 def _recorded_settings(scenario: Scenario | None) -> dict | None:
@@ -285,7 +318,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.lighting.mapset import MapSet
     from arsim.lighting.methods import MapParameters, bake
     from arsim.render.content import light_objects, scene_objects
-    from arsim.render.session import SessionSettings, maps_needed, run_session
+    from arsim.render.session import SessionSettings, run_session
     from arsim.run.report import write_report
     from arsim.run.stages import (estimate_lights, estimated_sweep, filled_probe, measured_capture, recorded_pair,
                                   true_probe, with_scenario)
@@ -319,8 +352,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             with step("recording", description) as update:
                 record(scenario, out / "recording", progress=lambda f: update(completed=f))
 
-        key = key_of("recording", {"settings": recording_settings(scenario), "code": code_digest(STAGE_CODE["recording"])})
-        _, hashes = stages.run("recording", key, "1/6 recording the sweep and the AR path", make_recording)
+        _, hashes = stages.run("recording", recording_key(scenario), "1/6 recording the sweep and the AR path", make_recording)
         if stages.record["recording"]["status"] == "reused":
             _with_scenario_toml(out / "recording", scenario)
         recording = out / "recording"
@@ -341,9 +373,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
                                            lambda d: step("capture", d), description)
         return Captured(result.response, list(result.snapshots), filled_probe(result), metrics)
 
-    code = {name: code_digest(modules, RUN_FILES if name != "recording" else ()) for name, modules in STAGE_CODE.items()}
-    capture_key = key_of("capture", {"recording": content, "code": code["capture"]})
-    captured, _ = stages.run("capture", capture_key, "2/6 capturing the light probe", make_capture, _save_captured,
+    keys = stage_keys(scenario, source, content, objects)
+    captured, _ = stages.run("capture", keys["capture"], "2/6 capturing the light probe", make_capture, _save_captured,
                              _load_captured)
 
     # 3. The light estimates over the sweep (the truth's, the capture's as it grew, each frame's alone), scored.
@@ -352,17 +383,14 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             (out / "estimates").mkdir(exist_ok=True)
             return estimated_sweep(sweep, out / "estimates", result=captured)
 
-    estimates_key = key_of("estimates", {"capture": capture_key, "code": code["estimates"]})
-    estimates, _ = stages.run("estimates", estimates_key, "3/6 estimating the light as phones report them", make_estimates,
+    estimates, _ = stages.run("estimates", keys["estimates"], "3/6 estimating the light as phones report them", make_estimates,
                               _save_estimates, _load_estimates)
 
     # 4. The maps of every method named, from the captured probe; each measured against the same method's
     # maps of the true environment (what the capture costs) and the true environment's accurate maps, where known.
     probe = to_layout(captured.probe, "anglemap", r.map_size)
     truth = true_probe(sweep, r.map_size)
-    needed = maps_needed(objects, r.method)
-    exponents = sorted({s for ss in needed.values() for s in ss})
-    methods = list(dict.fromkeys([*needed, *r.methods]))
+    needed, methods, exponents = maps_plan(objects, r)
     inside = anglemap_disk_mask(r.map_size)
 
     def make_maps(description):
@@ -394,9 +422,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             gl.release()
         return {"maps": maps, "truth_maps": truth_maps, "metrics": map_metrics, "gl_renderer": gl_renderer}
 
-    maps_key = key_of("maps", {"capture": capture_key, "map_size": r.map_size, "methods": methods, "exponents": exponents,
-                               "code": code["maps"]})
-    baked, _ = stages.run("maps", maps_key, f"4/6 baking the maps ({', '.join(methods)})", make_maps, _save_maps, _load_maps)
+    baked, _ = stages.run("maps", keys["maps"], f"4/6 baking the maps ({', '.join(methods)})", make_maps, _save_maps, _load_maps)
     maps = baked["maps"]
 
     # 5. The AR session over the AR path (the objects also lit by each light estimate at the frames shown),
@@ -418,10 +444,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         return {"frames": np.asarray(session.frames), "figures": figures, "estimate_scores": session.estimate_scores,
                 "tracking": TrackingFigures(tracking.found, tracking.rot_err_deg, tracking.trans_err_pct)}
 
-    session_key = key_of("session", {"maps": maps_key, "estimates": estimates_key, "render": settings_digest(r),
-                                     "ar": {"detector": scenario.ar.detector, "fusion": scenario.ar.fusion},
-                                     "budget_ms": scenario.profile.budget_ms, "code": code["session"]})
-    session, _ = stages.run("session", session_key, "5/6 rendering the AR session", make_session, _save_session, _load_session)
+    session, _ = stages.run("session", keys["session"], "5/6 rendering the AR session", make_session, _save_session, _load_session)
 
     # 6. Metrics, report and manifest.
     metrics = {"capture": {k: v for k, v in captured.metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
@@ -435,9 +458,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             write_text_atomic(out / "metrics.json", json_text(metrics))
             write_report(out, scenario, source, metrics, session["tracking"], session["frames"], maps)
 
-    report_key = key_of("report", {"session": session_key, "scenario": settings_digest(scenario), "source": source,
-                                   "code": code["report"]})
-    stages.run("report", report_key, "6/6 writing the report", make_report)
+    stages.run("report", keys["report"], "6/6 writing the report", make_report)
     for name, s in stages.record.items():
         s["seconds"] = seconds.get(name, 0.0)
     manifest = {
