@@ -258,7 +258,13 @@ class StageCache:
     def __init__(self, root: Path | None, max_bytes: float | None = None):
         self.root = root
         if max_bytes is None:
-            max_bytes = float(os.environ.get(MAX_BYTES_VAR, DEFAULT_MAX_GB)) * 2**30
+            text = os.environ.get(MAX_BYTES_VAR, "").strip() or str(DEFAULT_MAX_GB)
+            try:
+                max_bytes = float(text) * 2**30
+            except ValueError:
+                max_bytes = float("nan")
+            if not max_bytes >= 0:
+                raise ArsimError(f"${MAX_BYTES_VAR} = {text!r}: not a size in GiB; give a number such as 20")
         self.max_bytes = max_bytes
         if root is not None:
             try:
