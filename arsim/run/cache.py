@@ -228,6 +228,17 @@ def read_state(folder: Path) -> tuple[dict, dict[str, np.ndarray]]:
 # Entries
 
 
+def _link_or_copy(source: Path, target: Path) -> None:
+    """A hard link where both lie on one file system (no copy of a recording's gigabyte), else a copy. Every
+    writer of arsim replaces a file (core/files.py) rather than writing into it, so a link is never changed
+    through the run; one changed anyway fails the entry's hashes and the stage is computed again."""
+    target.unlink(missing_ok=True)
+    try:
+        os.link(source, target)
+    except OSError:
+        shutil.copyfile(source, target)
+
+
 def _files(root: Path) -> list[str]:
     return sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file())
 
@@ -316,11 +327,11 @@ class StageCache:
         return Hit(folder, {rel: f["sha256"] for rel, f in listed.items()})
 
     def restore(self, hit: Hit, out: Path) -> None:
-        """The entry's outputs copied into the run directory."""
+        """The entry's outputs linked (or copied) into the run directory."""
         for rel in hit.outputs:
             target = out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(hit.folder / "files" / rel, target)
+            _link_or_copy(hit.folder / "files" / rel, target)
 
     def store(self, stage: str, key: str, out: Path, outputs: list[str], state=None) -> Path | None:
         """A new entry: the outputs (paths in out) copied, state(folder) writing what later stages need; written
@@ -333,7 +344,7 @@ class StageCache:
             for rel in outputs:
                 target = tmp / "files" / rel
                 target.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(out / rel, target)
+                _link_or_copy(out / rel, target)
             if state is not None:
                 state(tmp / "state")
             files = {rel: {"sha256": sha256_file(tmp / rel), "bytes": (tmp / rel).stat().st_size} for rel in _files(tmp)}
