@@ -246,3 +246,14 @@ def test_each_stage_hashes_the_code_it_runs():
     assert "render/session.py" in session and "run/pipeline.py" in session and "sensors/recording.py" in session
     maps = code_files(STAGE_CODE["maps"], RUN_FILES)
     assert "lighting/methods.py" in maps and "render/session.py" not in maps
+
+
+def test_a_batch_passes_its_cache_to_each_run(tmp_path):
+    from pathlib import Path
+
+    from arsim.run.batch import run_command
+
+    base = run_command(Path("s.toml"), tmp_path, None, 0.0)
+    assert "--cache" not in base and "--no-cache" not in base  # the default cache
+    assert run_command(Path("s.toml"), tmp_path, None, 0.0, "off")[-1] == "--no-cache"
+    assert run_command(Path("s.toml"), tmp_path, None, 0.0, "/c")[-2:] == ["--cache", "/c"]
