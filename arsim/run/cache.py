@@ -405,4 +405,6 @@ class StageCache:
         if self.root is not None:
             for leftover in (self.root / "tmp").glob("*"):
                 shutil.rmtree(leftover, ignore_errors=True)
+            for lock in (self.root / "locks").glob("*.lock"):  # (one held now: that run's entry is still stored whole)
+                lock.unlink(missing_ok=True)
         return len(entries)
