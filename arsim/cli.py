@@ -712,9 +712,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         _check_recording(args.recording)
     source = str(args.scenario) if args.scenario is not None else "the embedded default scenario"
 
+    from arsim.run.cache import StageCache, cache_folder
+
+    cache = StageCache(cache_folder(args.cache, args.no_cache))
     result = None
     with _output(args, _scenario_file(args.scenario), args.recording, args.baseline) as work:
-        manifest = run_scenario(scenario, source, work, args.recording, _bar)
+        manifest = run_scenario(scenario, source, work, args.recording, _bar, cache)
         if args.baseline is not None and not args.update_baseline:
             result = run_diff(args.baseline, work, work / "diff", args.max_flip)
     out = args.output
@@ -723,6 +726,9 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"{_tracking_p95(s)}, " + (f"FLIP against the truth frame {s['flip_mean']:.4f}" if "flip_mean" in s else
                                       "frames not scored (the true environment is unknown)")
           + f"; report {out / 'report' / 'index.html'}")
+    for name, st in manifest["stages"].items():
+        where = f"from {st['from']}" if st["from"] else (f"stored in {st['stored']}" if st.get("stored") else "not cached")
+        print(f"  {name:<10} {st['status']:<8} {st['seconds']:7.2f} s  key {st['key']}  {where}")
     for why in manifest["metrics"].get("truth", {}).values():
         print(f"note: the truth is {why}")
     if args.update_baseline:
@@ -749,7 +755,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
     with (_output(args, *map(_scenario_file, args.scenarios), args.baselines) as work,
           progress_bar(f"running {len(args.scenarios)} scenarios", len(args.scenarios)) as update):
-        summary = run_batch(args.scenarios, work, args.workers, args.ray, args.baselines, args.max_flip, done)
+        summary = run_batch(args.scenarios, work, args.workers, args.ray, args.baselines, args.max_flip, done,
+                            cache=args.cache, no_cache=args.no_cache)
     out = args.output
     for s in summary["scenarios"]:
         if not s["ok"]:
@@ -758,6 +765,24 @@ def cmd_batch(args: argparse.Namespace) -> int:
           f"failed: {', '.join(summary['failed']) or 'none'}; regressions: {', '.join(summary['regressions']) or 'none'}; "
           f"summary {out / 'summary.md'}")
     return 1 if summary["failed"] or summary["regressions"] else 0
+
+
+def cmd_cache(args: argparse.Namespace) -> int:
+    from arsim.run.cache import StageCache, default_cache_dir
+
+    cache = StageCache(args.cache if args.cache is not None else default_cache_dir())
+    if args.action == "clear":
+        print(f"removed {cache.clear()} entries from {cache.root}")
+        return 0
+    info = cache.info()
+    if args.json:
+        print(json_text(info), end="")
+        return 0
+    print(f"run cache {info['folder']}: {info['entries']} entries, {info['bytes'] / 2**20:.1f} MiB "
+          f"(at most {info['max_bytes'] / 2**30:.1f} GiB kept)")
+    for stage, s in info["stages"].items():
+        print(f"  {stage:<10} {s['entries']:4d} entries {s['bytes'] / 2**20:10.1f} MiB")
+    return 0
 
 
 def cmd_diff(args: argparse.Namespace) -> int:
@@ -1041,7 +1066,24 @@ def _run_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--update-baseline", action="store_true", help="write the run's frames as the baseline DIR instead of comparing")
     p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"with --baseline: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
+    _cache_options(p)
     p.set_defaults(run=cmd_run)
+
+
+def _cache_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--cache", type=_path, metavar="DIR",
+                   help="reuse and keep each stage's outputs in this cache folder (default: $ARSIM_CACHE, else the "
+                        "user's cache folder, e.g. ~/.cache/arsim)")
+    p.add_argument("--no-cache", action="store_true", help="compute every stage; read and write no cache")
+
+
+def _cache_parser(sub: argparse._SubParsersAction) -> None:
+    p = _command(sub, "cache", "the run cache of `arsim run` and `arsim batch`: what it holds (info), or empty it (clear)",
+                 "arsim cache info   (or: arsim cache clear, arsim cache info --cache DIR)")
+    p.add_argument("action", choices=("info", "clear"), help="info: entries and size per stage; clear: remove every entry")
+    p.add_argument("--cache", type=_path, metavar="DIR", help="the cache folder (default: $ARSIM_CACHE, else the user's cache folder)")
+    p.add_argument("--json", action="store_true", help="info as JSON")
+    p.set_defaults(run=cmd_cache)
 
 
 def _batch_parser(sub: argparse._SubParsersAction) -> None:
@@ -1055,6 +1097,7 @@ def _batch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--baselines", type=_path, metavar="DIR", help="compare each run's frames with DIR/<scenario name>")
     p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"with --baselines: largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g})")
+    _cache_options(p)
     p.set_defaults(run=cmd_batch)
 
 
@@ -1089,7 +1132,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"arsim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for add in (_info_parser, _convert_parser, _bake_parser, _bases_parser, _prt_parser, _estimate_parser, _compare_methods_parser, _record_parser,
-                _capture_parser, _export_parser, _render_parser, _profile_parser, _run_parser, _batch_parser, _diff_parser, _validate_parser):
+                _capture_parser, _export_parser, _render_parser, _profile_parser, _run_parser, _batch_parser, _cache_parser, _diff_parser, _validate_parser):
         add(sub)
     return parser
 

@@ -23,3 +23,11 @@ def gradient() -> np.ndarray:
     h, w = 8, 16
     r = np.arange(h * w, dtype=np.float32).reshape(h, w) / 10
     return np.stack([r, r + 0.5, 2 * r + 0.25], axis=-1)
+
+
+def pytest_configure(config):
+    """The suite's runs use no run cache unless a test names one (--cache): every stage computed, the user's
+    cache folder untouched."""
+    import os
+
+    os.environ["ARSIM_CACHE"] = "off"

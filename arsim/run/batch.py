@@ -47,17 +47,22 @@ def _get(metrics: dict, dotted: str):
     return value
 
 
-def run_command(scenario: Path, out: Path, baseline: Path | None, max_flip: float) -> list[str]:
+def run_command(scenario: Path, out: Path, baseline: Path | None, max_flip: float, cache: str | None = None) -> list[str]:
+    """cache: the run cache folder, "off" for none, None for the default."""
     command = [sys.executable, "-m", "arsim", "run", str(scenario), "-o", str(out)]
     if baseline is not None:
         command += ["--baseline", str(baseline), "--max-flip", str(max_flip)]
+    if cache == "off":
+        command.append("--no-cache")
+    elif cache is not None:
+        command += ["--cache", cache]
     return command
 
 
-def run_one(scenario: str, out: str, baseline: str | None, max_flip: float) -> dict:
+def run_one(scenario: str, out: str, baseline: str | None, max_flip: float, cache: str | None = None) -> dict:
     """One scenario's `arsim run` (also what a Ray task runs): its status, metrics and regression."""
     start, started = time.perf_counter(), time.time()
-    done = subprocess.run(run_command(Path(scenario), Path(out), Path(baseline) if baseline else None, max_flip),
+    done = subprocess.run(run_command(Path(scenario), Path(out), Path(baseline) if baseline else None, max_flip, cache),
                           capture_output=True, text=True, env=os.environ | {"PYTHONUNBUFFERED": "1"})
     result = {"scenario": scenario, "out": out, "returncode": done.returncode, "wall_s": time.perf_counter() - start}
 
@@ -66,7 +71,9 @@ def run_one(scenario: str, out: str, baseline: str | None, max_flip: float) -> d
 
     manifest, diff = Path(out) / "manifest.json", Path(out) / "diff" / "diff.json"
     if written(manifest):
-        result["metrics"] = json.loads(manifest.read_text(encoding="utf-8"))["metrics"]
+        m = json.loads(manifest.read_text(encoding="utf-8"))
+        result["metrics"] = m["metrics"]
+        result["stages"] = {name: s["status"] for name, s in m.get("stages", {}).items()}
     if baseline is not None and written(diff):
         d = json.loads(diff.read_text(encoding="utf-8"))
         result["regression"] = {"passed": d["passed"], "flip_max": d["flip_max"], "worst_frame": d["worst_frame"],
@@ -127,28 +134,34 @@ def _run_ray(jobs: list[tuple], address: str, done: Callable[[dict], None]) -> l
 
 
 def run_batch(scenarios: list[Path], out: Path, workers: int = 1, ray_address: str | None = None,
-              baselines: Path | None = None, max_flip: float = 0.0, done: Callable[[dict], None] = lambda r: None) -> dict:
-    """Run every scenario into out/<name>, then write the summary; returns it."""
+              baselines: Path | None = None, max_flip: float = 0.0, done: Callable[[dict], None] = lambda r: None,
+              cache: Path | None = None, no_cache: bool = False) -> dict:
+    """Run every scenario into out/<name>, then write the summary; returns it. The runs share the run cache
+    (README: The run cache; cache: its folder, else the default): scenarios with the same recording (or
+    capture, maps...) compute it once, runs at once waiting on the first."""
     scenarios = [scenario_path(s) for s in scenarios]  # bundled names to their files
     names = [s.stem for s in scenarios]
     if len(set(names)) != len(names):
         raise ArsimError("two scenarios have the same file name; their runs would share a folder: rename one")
     max_flip = check_max_flip(max_flip, "the batch's FLIP limit")
     jobs = [(str(s.resolve()), str((out / s.stem).resolve()),
-             str((baselines / s.stem).resolve()) if baselines is not None else None, max_flip) for s in scenarios]
+             str((baselines / s.stem).resolve()) if baselines is not None else None, max_flip,
+             "off" if no_cache else (str(cache.resolve()) if cache is not None else None)) for s in scenarios]
     start = time.perf_counter()
     results = _run_ray(jobs, ray_address, done) if ray_address else _run_local(jobs, workers, done)
     wall = time.perf_counter() - start
     order = {str(Path(j[0])): k for k, j in enumerate(jobs)}
     results.sort(key=lambda r: order[r["scenario"]])
-    summary = {"scenarios": [{**{k: v for k, v in r.items() if k not in ("wall_s", "out")}, "name": Path(r["scenario"]).stem}
+    summary = {"scenarios": [{**{k: v for k, v in r.items() if k not in ("wall_s", "out", "stages")}, "name": Path(r["scenario"]).stem}
                              for r in results],
                "failed": [Path(r["scenario"]).stem for r in results if not r["ok"]],
                "regressions": [Path(r["scenario"]).stem for r in results if not r.get("regression", {}).get("passed", True)]}
     write_text_atomic(out / "summary.md", summary_markdown(summary))
     write_text_atomic(out / "summary.html", summary_html(summary))
     timing = {"backend": f"ray {ray_address}" if ray_address else f"local, {workers} workers", "wall_s": wall,
-              "per_scenario_s": {Path(r["scenario"]).stem: r["wall_s"] for r in results}}
+              "per_scenario_s": {Path(r["scenario"]).stem: r["wall_s"] for r in results},
+              # (which stages each run reused from the cache: how long they took depends on it)
+              "stages": {Path(r["scenario"]).stem: r.get("stages", {}) for r in results}}
     write_text_atomic(out / "summary.json", json_text(summary | {"timing": timing}))
     return summary | {"timing": timing}
 

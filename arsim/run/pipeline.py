@@ -10,6 +10,8 @@ shows it as a progress bar naming the stage.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import hashlib
 import json
 import platform
 import time
@@ -24,7 +26,10 @@ from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
 from arsim.core.gl import create_gl_context
 from arsim.core.progress import quiet_stage
+from arsim.core.resample import to_layout
+from arsim.capture.response import RecoveredResponse
 from arsim.evaluate.metrics import map_error
+from arsim.run.cache import ENTRY, StageCache, code_digest, key_of, read_state, settings_digest, sha256_file, snapshot, write_state
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
@@ -75,9 +80,235 @@ def versions(gl_renderer: str) -> dict:
             "opencv": cv2.__version__, "moderngl": moderngl.__version__, "gl_renderer": gl_renderer}
 
 
+# The arsim modules each stage runs (README: The run cache): a stage's key holds the sha256 of their source and
+# of every arsim module they import, transitively, and of RUN_FILES (which orchestrate the stages; their own
+# imports serve every stage, so they are hashed without being followed). The recording runs in sensors alone.
+STAGE_CODE = {
+    "recording": ("arsim.sensors.recording",),
+    "capture": ("arsim.capture.pipeline", "arsim.evaluate.capture_report", "arsim.sensors.formats", "arsim.sensors.frames"),
+    "estimates": ("arsim.estimate.series", "arsim.estimate.platforms", "arsim.estimate.shapes", "arsim.estimate.single_frame",
+                  "arsim.evaluate.estimates", "arsim.capture.pipeline", "arsim.sensors.frames"),
+    "maps": ("arsim.lighting.methods", "arsim.lighting.bake_output", "arsim.lighting.mapset", "arsim.evaluate.metrics",
+             "arsim.core.gl", "arsim.core.conventions"),
+    "session": ("arsim.render.session", "arsim.render.content", "arsim.evaluate.diff", "arsim.evaluate.profile",
+                "arsim.evaluate.session", "arsim.estimate.lit", "arsim.evaluate.estimates"),
+    "report": ("arsim.run.report", "arsim.evaluate.estimates", "arsim.evaluate.session", "arsim.scenario.loader"),
+}
+RUN_FILES = ("run/pipeline.py", "run/stages.py", "run/cache.py")
+# [capture]'s settings of the capture alone, and [ar]'s of the AR session alone; the others shape the recording
+CAPTURE_ONLY = ("align_every", "refine", "capture_size")
+AR_SESSION_ONLY = ("detector", "fusion")
+
+
+def recording_settings(scenario: Scenario) -> dict:
+    """What the recording depends on: [run] seed, [environment] (the map file by content), [device], [capture]'s
+    sweep settings and [ar]."""
+    sweep = {k: v for k, v in settings_digest(scenario.capture).items() if k not in CAPTURE_ONLY}
+    ar = {k: v for k, v in settings_digest(scenario.ar).items() if k not in AR_SESSION_ONLY}
+    return {"seed": scenario.run.seed, "environment": settings_digest(scenario.environment),
+            "device": settings_digest(scenario.device), "capture": sweep, "ar": ar}
+
+
+def recording_key(scenario: Scenario) -> str:
+    return key_of("recording", {"settings": recording_settings(scenario), "code": code_digest(STAGE_CODE["recording"])})
+
+
+def maps_plan(objects: list, r) -> tuple[dict[str, list[float]], list[str], list[float]]:
+    """The maps a run bakes: per method the exponents its objects need, every method (those and [render]
+    methods), and every exponent."""
+    from arsim.render.session import maps_needed
+
+    needed = maps_needed(objects, r.method)
+    return needed, list(dict.fromkeys([*needed, *r.methods])), sorted({s for ss in needed.values() for s in ss})
+
+
+def stage_keys(scenario: Scenario, source: str, content: str, objects: list) -> dict[str, str]:
+    """The keys of the stages after the recording: content is the recording's content hash (recording_digest),
+    objects the scenario's (render.content.scene_objects), whose materials name the maps baked."""
+    r = scenario.render
+    _, methods, exponents = maps_plan(objects, r)
+    code = {name: code_digest(modules, RUN_FILES) for name, modules in STAGE_CODE.items() if name != "recording"}
+    keys = {"capture": key_of("capture", {"recording": content, "code": code["capture"]})}
+    keys["estimates"] = key_of("estimates", {"capture": keys["capture"], "code": code["estimates"]})
+    keys["maps"] = key_of("maps", {"capture": keys["capture"], "map_size": r.map_size,
+                                   "methods": methods, "exponents": exponents, "code": code["maps"]})
+    keys["session"] = key_of("session", {"maps": keys["maps"], "estimates": keys["estimates"], "render": settings_digest(r),
+                                         "ar": {k: getattr(scenario.ar, k) for k in AR_SESSION_ONLY},
+                                         "budget_ms": scenario.profile.budget_ms, "code": code["session"]})
+    keys["report"] = key_of("report", {"session": keys["session"], "scenario": settings_digest(scenario), "source": source,
+                                       "code": code["report"]})
+    return keys
+
+
+def _recorded_settings(scenario: Scenario | None) -> dict | None:
+    """What of the scenario a recording carries (its meta.json's scenario_toml) the later stages read: the
+    recording's settings and all of [capture] (the capture takes its settings from the recording)."""
+    if scenario is None:
+        return None
+    return recording_settings(scenario) | {"capture": settings_digest(scenario.capture)}
+
+
+def recording_digest(folder: Path, hashes: dict[str, str], recorded: Scenario | None) -> str:
+    """A recording's content hash: every file's sha256 (hashes: path under folder -> sha256), a meta.json's
+    scenario_toml counted by what the later stages read of it (a reused recording carries the run's own
+    scenario, which may differ in [render])."""
+    h = hashlib.sha256()
+    for rel in sorted(hashes):
+        digest = hashes[rel]
+        if Path(rel).name == "meta.json":
+            try:
+                meta = json.loads((folder / rel).read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                meta = None
+            if isinstance(meta, dict) and "scenario_toml" in meta:
+                meta["scenario_toml"] = _recorded_settings(recorded)
+                digest = hashlib.sha256(json.dumps(meta, sort_keys=True, default=str).encode()).hexdigest()
+        h.update(f"{rel}\0{digest}\0".encode())
+    return h.hexdigest()
+
+
+def _hash_files(root: Path, rels) -> dict[str, str]:
+    return {rel: sha256_file(root / rel) for rel in rels}
+
+
+def _with_scenario_toml(folder: Path, scenario: Scenario) -> None:
+    """A reused recording's meta.json files made to carry this run's scenario, as a recording made now would."""
+    for path in sorted(folder.rglob("meta.json")):
+        meta = json.loads(path.read_text(encoding="utf-8"))
+        if "scenario_toml" in meta:
+            meta["scenario_toml"] = scenario_to_toml(scenario, portable=True)
+            write_text_atomic(path, json.dumps(meta, indent=2) + "\n")  # (as sensors.recording writes it)
+
+
+@dataclasses.dataclass(frozen=True)
+class Captured:
+    """What the later stages take of the capture (from a CaptureResult, or a cache entry's state)."""
+    response: RecoveredResponse
+    snapshots: list  # [(sweep time s, angle map)]
+    probe: np.ndarray  # the captured probe with its holes filled, at the capture's size
+    metrics: dict
+
+
+@dataclasses.dataclass(frozen=True)
+class TrackingFigures:
+    """What the report takes of the session's tracking (evaluate.tracking.TrackingRun's arrays)."""
+    found: np.ndarray
+    rot_err_deg: np.ndarray | None
+    trans_err_pct: np.ndarray | None
+
+    @property
+    def measured(self) -> bool:
+        return self.rot_err_deg is not None
+
+
+class _Stages:
+    """Each stage looked up in the cache by its key and reused, or computed and stored; what happened is
+    recorded for the manifest."""
+
+    def __init__(self, cache: StageCache, out: Path, step, seconds: dict[str, float]):
+        self.cache, self.out, self.step, self.seconds = cache, out, step, seconds
+        self.record: dict[str, dict] = {}
+
+    def run(self, name: str, key: str, description: str, compute, save=None, load=None):
+        """(value, {output path: sha256}) of the stage: load(state folder) of the entry where the key matches
+        (its outputs copied into the run), else compute() (its outputs: what it wrote into the run),
+        stored with save(value, state folder)."""
+        with self.cache.lock(name, key):
+            start = time.perf_counter()
+            hit = self.cache.lookup(name, key)  # (its files' hashes checked: part of the stage's time)
+            self.seconds[name] = round(self.seconds.get(name, 0.0) + time.perf_counter() - start, 2)
+            if hit is not None:
+                with self.step(name, f"{description} (reused)"):
+                    self.cache.restore(hit, self.out)
+                    value = load(hit.state) if load is not None else None
+                self.record[name] = {"status": "reused", "key": key, "from": str(hit.folder)}
+                return value, hit.outputs
+            before = snapshot(self.out)
+            value = compute(description)
+            after = snapshot(self.out)
+            outputs = [rel for rel, stamp in after.items() if before.get(rel) != stamp]
+            entry = self.cache.store(name, key, self.out, outputs,
+                                     (lambda folder: save(value, folder)) if save is not None else None)
+            self.record[name] = {"status": "computed", "key": key, "from": None,
+                                 "stored": str(entry) if entry is not None else None}
+            if entry is not None:
+                listed = json.loads((entry / ENTRY).read_text(encoding="utf-8"))["files"]
+                return value, {rel.removeprefix("files/"): f["sha256"] for rel, f in listed.items() if rel.startswith("files/")}
+            return value, _hash_files(self.out, outputs)
+
+
+def _save_captured(c: Captured, folder: Path) -> None:
+    times = [t for t, _ in c.snapshots]
+    maps = np.stack([m for _, m in c.snapshots]) if c.snapshots else np.zeros((0, 1, 1, 3), np.float32)
+    write_state(folder, {"metrics": c.metrics}, {"response": c.response.linear, "probe": c.probe,
+                                                 "snapshot_t": np.asarray(times, np.float64), "snapshots": maps})
+
+
+def _load_captured(folder: Path) -> Captured:
+    data, a = read_state(folder)
+    snapshots = [(float(t), m) for t, m in zip(a["snapshot_t"], a["snapshots"])]
+    return Captured(RecoveredResponse(a["response"]), snapshots, a["probe"], data["metrics"])
+
+
+def _save_estimates(e, folder: Path) -> None:
+    arrays = {f"{name}/{f.name}": np.asarray(getattr(light, f.name)) for name, light in e.final.items()
+              for f in dataclasses.fields(light)}
+    write_state(folder, {"figures": e.figures, "absent": e.absent, "final": list(e.final)}, arrays)
+
+
+def _load_estimates(folder: Path):
+    from arsim.estimate.shapes import LightEstimate
+    from arsim.run.stages import SweepEstimates
+
+    data, a = read_state(folder)
+    final = {}
+    for name in data["final"]:
+        fields = {f.name: a[f"{name}/{f.name}"] for f in dataclasses.fields(LightEstimate)}
+        fields["ambient_intensity"] = float(fields["ambient_intensity"])
+        final[name] = LightEstimate(**fields)
+    return SweepEstimates(data["figures"], final, data["absent"])
+
+
+def _save_maps(m: dict, folder: Path) -> None:
+    arrays = {f"{kind}/{name}/{s!r}": array for kind in ("maps", "truth_maps") for name, ms in m[kind].items()
+              for s, array in ms.maps.items()}
+    write_state(folder, {"metrics": m["metrics"], "gl_renderer": m["gl_renderer"],
+                         "sources": {kind: {name: ms.source for name, ms in m[kind].items()} for kind in ("maps", "truth_maps")}},
+                arrays)
+
+
+def _load_maps(folder: Path) -> dict:
+    from arsim.lighting.mapset import MapSet
+
+    data, a = read_state(folder)
+    loaded = {"metrics": data["metrics"], "gl_renderer": data["gl_renderer"]}
+    for kind in ("maps", "truth_maps"):
+        loaded[kind] = {}
+        for name, source in data["sources"][kind].items():
+            prefix = f"{kind}/{name}/"
+            loaded[kind][name] = MapSet(name, {float(k.removeprefix(prefix)): v for k, v in a.items() if k.startswith(prefix)},
+                                        source)
+    return loaded
+
+
+def _save_session(s: dict, folder: Path) -> None:
+    t = s["tracking"]
+    arrays = {"frames": s["frames"], "found": t.found}
+    if t.measured:
+        arrays |= {"rot_err_deg": t.rot_err_deg, "trans_err_pct": t.trans_err_pct}
+    write_state(folder, {"figures": s["figures"], "estimate_scores": s["estimate_scores"]}, arrays)
+
+
+def _load_session(folder: Path) -> dict:
+    data, a = read_state(folder)
+    tracking = TrackingFigures(a["found"], a.get("rot_err_deg"), a.get("trans_err_pct"))
+    return {"frames": a["frames"], "tracking": tracking, "figures": data["figures"], "estimate_scores": data["estimate_scores"]}
+
+
 def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | None = None,
-                 stage: Callable = quiet_stage) -> dict:
-    """Run every stage into out; returns the manifest (also written to out/manifest.json)."""
+                 stage: Callable = quiet_stage, cache: StageCache | None = None) -> dict:
+    """Run every stage into out, each reused from the cache where its key matches (README: The run cache);
+    returns the manifest (also written to out/manifest.json)."""
     from arsim.capture.pipeline import CaptureSettings, recording_scenario
     from arsim.evaluate.diff import masked_flip
     from arsim.evaluate.estimates import estimate_summary, write_estimate_frames
@@ -87,13 +318,14 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.lighting.mapset import MapSet
     from arsim.lighting.methods import MapParameters, bake
     from arsim.render.content import light_objects, scene_objects
-    from arsim.render.session import SessionSettings, maps_needed, run_session
+    from arsim.render.session import SessionSettings, run_session
     from arsim.run.report import write_report
-    from arsim.run.stages import (estimate_lights, estimated_sweep, measured_capture, recorded_pair, session_probe, true_probe,
-                                  with_scenario)
+    from arsim.run.stages import (estimate_lights, estimated_sweep, filled_probe, measured_capture, recorded_pair,
+                                  true_probe, with_scenario)
     from arsim.sensors.frames import truth_absent
     from arsim.sensors.recording import record, recording_segments
 
+    cache = cache if cache is not None else StageCache(None)
     seconds: dict[str, float] = {}
 
     @contextlib.contextmanager
@@ -102,8 +334,9 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         start = time.perf_counter()
         with stage(description) as update:
             yield update
-        seconds[key] = round(time.perf_counter() - start, 2)
+        seconds[key] = round(seconds.get(key, 0.0) + time.perf_counter() - start, 2)
 
+    stages = _Stages(cache, out, step, seconds)
     r = scenario.render
     if not scenario.ar.enabled and recording is None:
         raise ArsimError(f"{source}: [ar] enabled = false; a run needs the AR path: set it to true")
@@ -111,92 +344,131 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     out.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out / "scenario.toml", scenario_to_toml(scenario))
 
-    # 1. The recording: made now, or one made before (`arsim record`) replayed.
+    # 1. The recording: made now (or reused), or one made before (`arsim record`) replayed.
     if recording is None:
         recording_segments(scenario)
-        with step("recording", "1/6 recording the sweep and the AR path") as update:
-            record(scenario, out / "recording", progress=lambda f: update(completed=f))
+
+        def make_recording(description):
+            with step("recording", description) as update:
+                record(scenario, out / "recording", progress=lambda f: update(completed=f))
+
+        _, hashes = stages.run("recording", recording_key(scenario), "1/6 recording the sweep and the AR path", make_recording)
+        if stages.record["recording"]["status"] == "reused":
+            _with_scenario_toml(out / "recording", scenario)
         recording = out / "recording"
+        hashes = {k.removeprefix("recording/"): v for k, v in hashes.items()}
+    else:
+        files = [recording] if recording.is_file() else sorted(p for p in recording.rglob("*") if p.is_file())
+        hashes = {p.relative_to(recording).as_posix() if p != recording else p.name: sha256_file(p) for p in files}
     sweep, ar = recorded_pair(recording)
     recorded = recording_scenario(sweep)  # the sensors as recorded, whatever the scenario given says
     # What of the truth the recording lacks (a real recording: all of it); what needs it is left out, saying why.
     absent = truth_absent(ar) | truth_absent(sweep)
+    content = recording_digest(recording if recording.is_dir() else recording.parent, hashes,
+                               recorded if "scenario_toml" in sweep.meta else None)
 
     # 2. The capture, measured against the truth (as far as the recording has one).
-    result, capture_metrics = measured_capture(sweep, CaptureSettings.of(recorded), out / "capture",
-                                               lambda description: step("capture", description),
-                                               "2/6 capturing the light probe")
+    def make_capture(description):
+        result, metrics = measured_capture(sweep, CaptureSettings.of(recorded), out / "capture",
+                                           lambda d: step("capture", d), description)
+        return Captured(result.response, list(result.snapshots), filled_probe(result), metrics)
+
+    keys = stage_keys(scenario, source, content, objects)
+    captured, _ = stages.run("capture", keys["capture"], "2/6 capturing the light probe", make_capture, _save_captured,
+                             _load_captured)
 
     # 3. The light estimates over the sweep (the truth's, the capture's as it grew, each frame's alone), scored.
-    with step("estimates", "3/6 estimating the light as phones report it"):
-        (out / "estimates").mkdir(exist_ok=True)
-        estimates = estimated_sweep(sweep, out / "estimates", result=result)
+    def make_estimates(description):
+        with step("estimates", description):
+            (out / "estimates").mkdir(exist_ok=True)
+            return estimated_sweep(sweep, out / "estimates", result=captured)
+
+    estimates, _ = stages.run("estimates", keys["estimates"], "3/6 estimating the light as phones report them", make_estimates,
+                              _save_estimates, _load_estimates)
 
     # 4. The maps of every method named, from the captured probe; each measured against the same method's
     # maps of the true environment (what the capture costs) and the true environment's accurate maps, where known.
-    probe = session_probe(result, r.map_size)
+    probe = to_layout(captured.probe, "anglemap", r.map_size)
     truth = true_probe(sweep, r.map_size)
-    needed = maps_needed(objects, r.method)
-    exponents = sorted({s for ss in needed.values() for s in ss})
-    methods = list(dict.fromkeys([*needed, *r.methods]))
-    maps, truth_maps, map_metrics = {}, {}, {}
+    needed, methods, exponents = maps_plan(objects, r)
     inside = anglemap_disk_mask(r.map_size)
-    with step("maps", f"4/6 baking the maps ({', '.join(methods)})") as update:
-        params = MapParameters()
-        # accurate and bounds on the GL path: NumPy's float64 sums take half a minute at 128².
-        gl = create_gl_context()
-        gl_renderer = gl.info["GL_RENDERER"]  # (for the manifest: the context is released after the maps)
-        reference = bake(truth, exponents, "accurate", params, gl=gl).maps if truth is not None else None
-        for k, name in enumerate(methods):
-            baked = bake(probe, exponents, name, params, gl=gl)
-            (out / "maps" / name).mkdir(parents=True, exist_ok=True)
-            write_bake(out / "maps" / name, exponents, name, params, baked, "capture/env.exr")
-            maps[name] = MapSet.of(name, exponents, baked.maps, "capture/env.exr")
-            update(completed=(k + 1) / len(methods))
-            if truth is None:  # (nothing to measure the maps against: metrics.json's "truth" says why)
-                map_metrics[name] = {"seconds": baked.seconds_total}
-                continue
-            true_maps = reference if name == "accurate" else bake(truth, exponents, name, params, gl=gl).maps
-            truth_maps[name] = MapSet.of(name, exponents, true_maps, "truth")
-            map_metrics[name] = {
-                "seconds": baked.seconds_total,
-                "per_exponent": {f"{s:g}": {
-                    "error_vs_truth_same_method_pct": map_error(true_maps[e][inside], baked.maps[e][inside]).mean_percent,
-                    "error_vs_truth_accurate_pct": map_error(reference[e][inside], baked.maps[e][inside]).mean_percent,
-                    "method_error_on_truth_pct": map_error(reference[e][inside], true_maps[e][inside]).mean_percent,
-                } for e, s in enumerate(exponents)}}
-        gl.release()
+
+    def make_maps(description):
+        maps, truth_maps, map_metrics = {}, {}, {}
+        with step("maps", description) as update:
+            params = MapParameters()
+            # accurate and bounds on the GL path: NumPy's float64 sums take half a minute at 128².
+            gl = create_gl_context()
+            gl_renderer = gl.info["GL_RENDERER"]  # (for the manifest: the context is released after the maps)
+            reference = bake(truth, exponents, "accurate", params, gl=gl).maps if truth is not None else None
+            for k, name in enumerate(methods):
+                baked = bake(probe, exponents, name, params, gl=gl)
+                (out / "maps" / name).mkdir(parents=True, exist_ok=True)
+                write_bake(out / "maps" / name, exponents, name, params, baked, "capture/env.exr")
+                maps[name] = MapSet.of(name, exponents, baked.maps, "capture/env.exr")
+                update(completed=(k + 1) / len(methods))
+                if truth is None:  # (nothing to measure the maps against: metrics.json's "truth" says why)
+                    map_metrics[name] = {"seconds": baked.seconds_total}
+                    continue
+                true_maps = reference if name == "accurate" else bake(truth, exponents, name, params, gl=gl).maps
+                truth_maps[name] = MapSet.of(name, exponents, true_maps, "truth")
+                map_metrics[name] = {
+                    "seconds": baked.seconds_total,
+                    "per_exponent": {f"{s:g}": {
+                        "error_vs_truth_same_method_pct": map_error(true_maps[e][inside], baked.maps[e][inside]).mean_percent,
+                        "error_vs_truth_accurate_pct": map_error(reference[e][inside], baked.maps[e][inside]).mean_percent,
+                        "method_error_on_truth_pct": map_error(reference[e][inside], true_maps[e][inside]).mean_percent,
+                    } for e, s in enumerate(exponents)}}
+            gl.release()
+        return {"maps": maps, "truth_maps": truth_maps, "metrics": map_metrics, "gl_renderer": gl_renderer}
+
+    baked, _ = stages.run("maps", keys["maps"], f"4/6 baking the maps ({', '.join(methods)})", make_maps, _save_maps, _load_maps)
+    maps = baked["maps"]
 
     # 5. The AR session over the AR path (the objects also lit by each light estimate at the frames shown),
-    # and its render-loop profile.
-    session_settings = with_scenario(SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay,
-                                                     flip_every=r.flip_every), scenario, [light for _, light in result.snapshots])
-    with step("session", "5/6 rendering the AR session") as update:
-        session = run_session(ar, result.response.linear[:, 1], maps, truth_maps if truth is not None else None, out,
-                              light_objects(objects, probe), masked_flip, session_settings,
-                              truth_objects=light_objects(objects, truth) if truth is not None else None,
-                              progress=lambda f: update(completed=f),
-                              estimates=estimate_lights(estimates.final, needed, objects, r.map_size))
-    (out / "profile").mkdir(exist_ok=True)
-    write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")
+    # its render-loop profile, and the frames lit by each estimate.
+    def make_session(description):
+        session_settings = with_scenario(SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay,
+                                                         flip_every=r.flip_every), scenario,
+                                         [light for _, light in captured.snapshots])
+        with step("session", description) as update:
+            session = run_session(ar, captured.response.linear[:, 1], maps, baked["truth_maps"] if truth is not None else None,
+                                  out, light_objects(objects, probe), masked_flip, session_settings,
+                                  truth_objects=light_objects(objects, truth) if truth is not None else None,
+                                  progress=lambda f: update(completed=f),
+                                  estimates=estimate_lights(estimates.final, needed, objects, r.map_size))
+            (out / "profile").mkdir(exist_ok=True)
+            write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")
+            write_estimate_frames(session.estimate_frames, out / "estimates" / "frames")
+            tracking, figures = session_metrics(ar, session)
+        return {"frames": np.asarray(session.frames), "figures": figures, "estimate_scores": session.estimate_scores,
+                "tracking": TrackingFigures(tracking.found, tracking.rot_err_deg, tracking.trans_err_pct)}
+
+    session, _ = stages.run("session", keys["session"], "5/6 rendering the AR session", make_session, _save_session, _load_session)
 
     # 6. Metrics, report and manifest.
-    tracking, session_figures = session_metrics(ar, session)
-    metrics = {"capture": {k: v for k, v in capture_metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
-               "estimates": estimate_summary(estimates.figures, session.estimate_scores),
-               "maps": map_metrics, "session": {k: v for k, v in session_figures.items() if k != "truth"}}
+    metrics = {"capture": {k: v for k, v in captured.metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},
+               "estimates": estimate_summary(estimates.figures, session["estimate_scores"]),
+               "maps": baked["metrics"], "session": {k: v for k, v in session["figures"].items() if k != "truth"}}
     if absent:  # (every stage's figures that need it are left out)
         metrics["truth"] = absent
-    write_text_atomic(out / "metrics.json", json_text(metrics))
-    with step("report", "6/6 writing the report") as update:
-        write_estimate_frames(session.estimate_frames, out / "estimates" / "frames")
-        write_report(out, scenario, source, metrics, tracking, session.frames, maps)
+
+    def make_report(description):
+        with step("report", description):
+            write_text_atomic(out / "metrics.json", json_text(metrics))
+            write_report(out, scenario, source, metrics, session["tracking"], session["frames"], maps)
+
+    stages.run("report", keys["report"], "6/6 writing the report", make_report)
+    for name, s in stages.record.items():
+        s["seconds"] = seconds.get(name, 0.0)
     manifest = {
         "scenario": {"source": source, "name": scenario.run.name, "resolved": "scenario.toml"},
         "seed": scenario.run.seed,
         "recording": str(recording) if recording != out / "recording" else "recording",
-        "versions": versions(gl_renderer),
+        "versions": versions(baked["gl_renderer"]),
         "seconds_per_stage": seconds,
+        "stages": stages.record,
+        "cache": str(cache.root) if cache.root is not None else None,
         "metrics": metrics,
         "files": _files_under(out, FILE_ROLES),
     }

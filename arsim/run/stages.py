@@ -193,10 +193,15 @@ def single_frame_estimates(rec: Recording, response, progress=lambda fraction: N
 ESTIMATE_TRUTH_SIZE = 512  # the true environment's angle map the truth's estimate is taken from
 
 
+def filled_probe(result: CaptureResult) -> np.ndarray:
+    """The captured probe with its holes filled from their surroundings, at the capture's size."""
+    acc = result.accumulator
+    return filled(acc.probe(), acc.covered())
+
+
 def session_probe(result: CaptureResult, map_size: int) -> np.ndarray:
     """The captured probe as the maps take it: holes filled from their surroundings, map_size²."""
-    acc = result.accumulator
-    return to_layout(filled(acc.probe(), acc.covered()), "anglemap", map_size)
+    return to_layout(filled_probe(result), "anglemap", map_size)
 
 
 def session_inputs(scenario: Scenario, out: Path, probe: np.ndarray | None, map_size: int, capture_probe: bool = True,
