@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 import scipy.sparse
 
-from arsim.core.conventions import anglemap_disk_mask, anglemap_st_to_pixel, direction_to_anglemap_st, normalize
+from arsim.core.conventions import anglemap_st_to_pixel, direction_to_anglemap_st, normalize
 from arsim.core.conventions import cube_directions, cube_solid_angles, cube_texels  # noqa: F401  (the estimates' cube maps)
 from arsim.core.resample import beyond_rim_indices
 from arsim.lighting.bases.functions import sh9
@@ -78,8 +78,8 @@ def cubemap(anglemap: np.ndarray, size: int = CUBE_SIZE) -> np.ndarray:
     radiance of the angle-map texels that fall in it: a box filter, so that a small sun's energy lands in
     one texel (point samples miss it or multiply it), and a uniform light stays uniform (dividing by the
     texel's exact solid angle instead would make each texel as bright as the count of angle-map texels that
-    happen to fall in it: +-10 % at 512², +-23 % at 64²). A light coarser than SPLAT_SIDE is resampled to
-    it first (core.resample), so that every cube texel gets many."""
+    happen to fall in it: +-10 % at 512², +-23 % at 64²). A light coarser than SPLAT_SIDE is read at a
+    SPLAT_SIDE angle map's texels, so that every cube texel gets many (_cube_operator)."""
     light = np.asarray(anglemap, dtype=np.float64)[..., :3]
     n = light.shape[0]
     return (_cube_operator(n, size) @ light.reshape(n * n, 3)).reshape(6, size, size, 3).astype(np.float32)
@@ -92,9 +92,9 @@ def _cube_operator(n: int, size: int) -> scipy.sparse.csr_matrix:
     SPLAT_SIDE is read bilinearly at a SPLAT_SIDE angle map's texel centres (as core.resample.to_layout
     resamples: edges clamp, texels beyond the rim take their nearest inside)."""
     side = max(n, SPLAT_SIDE)
-    _, d, omega = _disk_geometry(side)
+    inside, d, omega = _disk_geometry(side)
     if side == n:  # the light's own texels
-        source, weight = np.flatnonzero(anglemap_disk_mask(n))[:, None], np.ones((len(d), 1))
+        source, weight = np.flatnonzero(inside)[:, None], np.ones((len(d), 1))
     else:
         rows, cols = anglemap_st_to_pixel(direction_to_anglemap_st(d), n)
         r0, c0 = np.floor(rows).astype(int), np.floor(cols).astype(int)
@@ -106,20 +106,24 @@ def _cube_operator(n: int, size: int) -> scipy.sparse.csr_matrix:
             source.append(ri[r, c] * n + ci[r, c])
             weight.append(w)
         source, weight = np.stack(source, axis=1), np.stack(weight, axis=1)
-    face, row, col = cube_texels(d, size)
-    texel = (face * size + row) * size + col
+    texel = _cube_texel_index(d, size)
     per_texel = np.bincount(texel, weights=omega, minlength=6 * size * size)
     values = weight * (omega / np.maximum(per_texel[texel], 1e-300))[:, None]
     rows_ = np.repeat(texel, source.shape[1])
     return scipy.sparse.csr_matrix((values.ravel(), (rows_, source.ravel())), shape=(6 * size * size, n * n))
 
 
+def _cube_texel_index(directions: np.ndarray, size: int) -> np.ndarray:
+    """(K,) the flat index (face, row, col) of the cube texel each unit direction falls in."""
+    face, row, col = cube_texels(directions, size)
+    return (face * size + row) * size + col
+
+
 def cube_means(directions: np.ndarray, radiance: np.ndarray, omega: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     """((6, size, size, 3) the solid-angle weighted mean radiance of the samples (directions (K, 3), radiance
     (K, 3), solid angles (K,)) that fall in each cube texel, 0 where none does; (6, size, size) their solid
     angle per texel)."""
-    face, row, col = cube_texels(directions, size)
-    texel, count = (face * size + row) * size + col, 6 * size * size
+    texel, count = _cube_texel_index(directions, size), 6 * size * size
     weighted = radiance * omega[:, None]
     sums = np.stack([np.bincount(texel, weights=weighted[:, c], minlength=count) for c in range(3)], axis=-1)
     weights = np.bincount(texel, weights=omega, minlength=count)

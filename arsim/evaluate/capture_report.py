@@ -146,37 +146,26 @@ def brightest_warning(metrics: dict) -> str | None:
 
 
 def plot_drift(result: CaptureResult, path: Path) -> Path:
-    if result.truth is None:
-        return plot_correction(result, path)
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(9, 3.5))
-    ax.plot(result.t_s, orientation_errors_deg(result.uncorrected, result.truth), label="IMU only (uncorrected)")
-    if result.refinement is not None:
-        ax.plot(result.t_s, orientation_errors_deg(result.online, result.truth), label="online alignment", alpha=0.7)
-        ax.plot(result.t_s, orientation_errors_deg(result.corrected, result.truth), label="refined (what the probe holds)")
+    """drift.png: the capture's orientations against the truth; without a ground truth, how far the capture
+    turned the IMU's orientations (the drift it corrected, as far as the alignment saw it)."""
+    online = [("online alignment", result.online, 0.7)] if result.refinement is not None else []
+    if result.truth is not None:
+        reference, ylabel, title = (result.truth, "camera orientation error (degrees)",
+                                    "Drift of the capture's orientation against the truth")
+        last = "refined (what the probe holds)" if online else "with feature alignment"
+        curves = [("IMU only (uncorrected)", result.uncorrected, 1.0), *online, (last, result.corrected, 1.0)]
     else:
-        ax.plot(result.t_s, orientation_errors_deg(result.corrected, result.truth), label="with feature alignment")
-    ax.scatter(result.t_s[result.aligned], np.zeros(result.aligned.sum()), s=2, color="tab:gray", label="online alignment succeeded")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("camera orientation error (degrees)")
-    ax.set_title("Drift of the capture's orientation against the truth")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    return _save(fig, path)
-
-
-def plot_correction(result: CaptureResult, path: Path) -> Path:
-    """Without a ground truth: how far the capture turned the IMU's orientations (the drift it corrected, as far
-    as the alignment saw it)."""
+        reference, ylabel, title = (result.uncorrected, "angle from the IMU's orientation (degrees)",
+                                    "The capture's correction of the IMU's orientation (the recording has no ground truth)")
+        curves = [*online, ("what the probe holds", result.corrected, 1.0)]
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(9, 3.5))
-    if result.refinement is not None:
-        ax.plot(result.t_s, orientation_errors_deg(result.uncorrected, result.online), label="online alignment", alpha=0.7)
-    ax.plot(result.t_s, orientation_errors_deg(result.uncorrected, result.corrected), label="what the probe holds")
+    for label, orientations, alpha in curves:
+        ax.plot(result.t_s, orientation_errors_deg(orientations, reference), label=label, alpha=alpha)
     ax.scatter(result.t_s[result.aligned], np.zeros(result.aligned.sum()), s=2, color="tab:gray", label="online alignment succeeded")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("angle from the IMU's orientation (degrees)")
-    ax.set_title("The capture's correction of the IMU's orientation (the recording has no ground truth)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend()
     return _save(fig, path)
