@@ -187,13 +187,6 @@ def filament_sh(sh: np.ndarray) -> np.ndarray:
     return np.asarray(sh, dtype=np.float64) * (BAND_FACTORS / np.pi * BASIS_CONSTANTS)[:, None]
 
 
-def filament_irradiance(sh_txt: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Filament's shader formula: E(n) / pi from sh.txt's (9, 3) at unit normals (..., 3), not clamped."""
-    x, y, z = normals[..., 0], normals[..., 1], normals[..., 2]
-    poly = np.stack([np.ones_like(x), y, z, x, y * x, y * z, 3 * z * z - 1, z * x, x * x - y * y], axis=-1)
-    return poly @ sh_txt
-
-
 def _write_filament(out: Path, sh: np.ndarray, origin: str) -> list[Path]:
     pre = filament_sh(sh)
     lines = [f"({r: .9f}, {g: .9f}, {b: .9f}); // {name}, irradiance, pre-scaled base"

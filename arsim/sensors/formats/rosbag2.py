@@ -53,10 +53,6 @@ def _typestore():
     return get_typestore(Stores.ROS2_HUMBLE)
 
 
-def is_bag(path: Path) -> bool:
-    return (Path(path) / "metadata.yaml").is_file()
-
-
 class _Messages:
     """The typestore's message classes, and headers from nanoseconds."""
 
