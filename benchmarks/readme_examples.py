@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -53,7 +54,7 @@ def session_script(blocks: list[list[str]], skip: re.Pattern | None) -> tuple[st
             rows.append({"block": b, "command": command, "skipped": skipped})
             if skipped:
                 continue
-            lines += [f"echo '### [{b}] {command}' >&2", "__s=$EPOCHREALTIME", command,
+            lines += [f"echo {shlex.quote(f'### [{b}] {command}')} >&2", "__s=$EPOCHREALTIME", command,
                       f'__rc=$?; echo "{MARK} {k} $__rc $__s $EPOCHREALTIME"']
     return "\n".join(lines) + "\n", rows
 
