@@ -321,3 +321,23 @@ def test_an_estimate_lights_as_maps_a_uniform_light_gives_its_radiance_and_a_sun
     assert np.abs(irradiance_map - exact).max() < 0.01 * sun_e / np.pi
     sh_alone = np.maximum(sh9(normals) @ (e.sh_radiance[:, 1] * COSINE_KERNEL), 0.0) / np.pi
     assert np.abs(sh_alone - exact).max() > 0.05 * sun_e / np.pi
+
+
+def test_compiled_lobe_averages_equal_the_numpy_reference():
+    """estimate.lit.lobe_averages_of (every exponent from one pass, negligible terms skipped) equals
+    lobe_average_of exponent by exponent, wide and narrow lobes, on a light with a bright spot."""
+    from arsim.estimate.lit import lobe_average_of, lobe_averages_of
+    from arsim.estimate.shapes import cube_directions, cube_solid_angles
+
+    rng = np.random.default_rng(4)
+    side = 16
+    samples = cube_directions(side).reshape(-1, 3)
+    weights = np.tile(cube_solid_angles(side).reshape(-1), 6)
+    radiance = rng.random((len(samples), 3)) * 0.2
+    radiance[100] = (500.0, 400.0, 300.0)
+    d = rng.normal(size=(300, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    exponents = [2.0, 10.0, 80.0, 1280.0, 100000.0]
+    compiled = lobe_averages_of(samples, radiance, weights, d, exponents)
+    for k, s in enumerate(exponents):
+        np.testing.assert_allclose(compiled[k], lobe_average_of(samples, radiance, weights, d, s), rtol=1e-10, atol=1e-14)

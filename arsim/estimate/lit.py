@@ -14,6 +14,7 @@ use their estimates:
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask
@@ -62,16 +63,64 @@ def lobe_average_of(samples: np.ndarray, radiance: np.ndarray, weights: np.ndarr
     return out
 
 
+# A sample whose lobe term falls below e^-LOBE_CUTOFF of the largest one's adds less than float64 resolves
+# to the sums: skipped (narrow lobes then cost a few samples each, not all of them).
+LOBE_CUTOFF = 60.0
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _lobe_averages(samples, radiance, weights, directions, exponents, out):
+    for k in numba.prange(directions.shape[0]):
+        d0, d1, d2 = directions[k, 0], directions[k, 1], directions[k, 2]
+        cos = np.empty(samples.shape[0])
+        top = 0.0
+        for m in range(samples.shape[0]):
+            c = d0 * samples[m, 0] + d1 * samples[m, 1] + d2 * samples[m, 2]
+            cos[m] = c
+            top = max(top, c)
+        top = max(top, 1e-300)
+        for m in range(samples.shape[0]):  # (log of the ratio to the largest cosine, shared by the exponents)
+            cos[m] = np.log(cos[m] / top) if cos[m] > 0.0 else -np.inf
+        for e in range(exponents.shape[0]):
+            s = exponents[e]
+            r, g, b, den = 0.0, 0.0, 0.0, 0.0
+            for m in range(samples.shape[0]):
+                t = s * cos[m]
+                if t > -LOBE_CUTOFF:
+                    w = np.exp(t) * weights[m]
+                    r += w * radiance[m, 0]
+                    g += w * radiance[m, 1]
+                    b += w * radiance[m, 2]
+                    den += w
+            den = max(den, 1e-300)
+            out[e, k, 0], out[e, k, 1], out[e, k, 2] = r / den, g / den, b / den
+
+
+def lobe_averages_of(samples: np.ndarray, radiance: np.ndarray, weights: np.ndarray, directions: np.ndarray,
+                     exponents) -> np.ndarray:
+    """(E, K, 3) lobe_average_of for several exponents at once, compiled: each sample's cosine computed once
+    for all exponents, terms below e^-LOBE_CUTOFF of the largest skipped (lobe_average_of is its reference)."""
+    d = np.ascontiguousarray(directions, dtype=np.float64)
+    out = np.empty((len(exponents), len(d), 3))
+    _lobe_averages(np.ascontiguousarray(samples, dtype=np.float64), np.ascontiguousarray(radiance, dtype=np.float64),
+                   np.ascontiguousarray(weights, dtype=np.float64), d, np.asarray(exponents, dtype=np.float64), out)
+    return out
+
+
 def estimate_maps(e: LightEstimate, needed: dict[str, list[float]], size: int, source: str) -> dict[str, MapSet]:
     """A MapSet per map method the objects need (the same maps under each name: an estimate is not baked by
     a method), size² angle maps, 0 off the disk."""
     inside = anglemap_disk_mask(size)
     d = anglemap_directions(size)[inside]
     exponents = sorted({float(s) for ss in needed.values() for s in ss} | {1.0})
+    side = e.cubemap.shape[1]
+    lobes = [s for s in exponents if s != 1.0]
+    averages = lobe_averages_of(cube_directions(side).reshape(-1, 3), np.asarray(e.cubemap).reshape(-1, 3),
+                                np.tile(cube_solid_angles(side).reshape(-1), 6), d, lobes)
     maps = {}
     for s in exponents:
         image = np.zeros((size, size, 3), np.float32)
-        image[inside] = estimate_irradiance(e, d) / np.pi if s == 1.0 else lobe_average(e.cubemap, d, s)
+        image[inside] = estimate_irradiance(e, d) / np.pi if s == 1.0 else averages[lobes.index(s)]
         maps[s] = image
     return {name: MapSet(name, {s: maps[float(s)] for s in {1.0, *exponents_}}, source)
             for name, exponents_ in needed.items()}
