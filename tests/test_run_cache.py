@@ -56,10 +56,13 @@ def runs(tmp_path_factory):
     (root / "s.toml").write_text(_small())
     (root / "r.toml").write_text(_small(**{"[render]\n": "[render]\nkey = 0.3\n"}))
     (root / "c.toml").write_text(_small(**{"capture_size = 128": "capture_size = 64"}))
+    (root / "t.toml").write_text(_small(**{"[render]\n": "[render]\nkey = 0.35\n"}))
     done = {"batch": arsim("batch", root / "s.toml", root / "r.toml", "-o", root / "batch", "--workers", "2", "--cache", cache),
             "warm": arsim("run", root / "s.toml", "-o", root / "warm", "--cache", cache),
             "fresh": arsim("run", root / "s.toml", "-o", root / "fresh", "--no-cache"),
-            "capture": arsim("run", root / "c.toml", "-o", root / "capture", "--cache", cache)}
+            "capture": arsim("run", root / "c.toml", "-o", root / "capture", "--cache", cache),
+            "render": arsim("run", root / "t.toml", "-o", root / "render", "--cache", cache),
+            "render_fresh": arsim("run", root / "t.toml", "-o", root / "render_fresh", "--no-cache")}
     for name, r in done.items():
         assert r.returncode == 0, (name, r.stdout, r.stderr)
     done["root"] = root
@@ -110,6 +113,22 @@ def test_a_render_setting_recomputes_the_session_and_report_only(runs):
     assert _differing(a / "capture", b / "capture") in ([], ["metrics.json"])
 
 
+def test_a_render_setting_renders_again_with_the_poses_tracked_before_byte_identical(runs):
+    root = runs["root"]
+    render, fresh = root / "render", root / "render_fresh"
+    assert _computed(render) == {"session", "report"}
+    sessions = [json.loads((run / "manifest.json").read_text())["stages"]["session"] for run in (render, fresh)]
+    assert sessions[0]["tracking"]["status"] == "reused" and sessions[1]["tracking"]["status"] == "computed"
+    assert sessions[0]["tracking"]["key"] == sessions[1]["tracking"]["key"]
+    differing = _differing(render, fresh)
+    assert all(any(fnmatch.fnmatch(name, p) for p in TIMED_FILES) for name in differing), differing
+    assert "session.mp4" in _files(render) and "frames/000000.png" in _files(render)
+    # the profile still has the tracking step, with the times measured when the poses were tracked
+    for run in (render, fresh):
+        track = json.loads((run / "profile" / "profile.json").read_text())["runs"][0]["steps"]["track"]["cpu"]
+        assert track["p50"] > 0, (run, track)
+
+
 def test_a_capture_setting_recomputes_the_capture_and_later_stages(runs):
     assert _status(runs["root"] / "capture")["recording"] == "reused"
     assert _computed(runs["root"] / "capture") == LATER["capture"]
@@ -141,7 +160,8 @@ def test_cache_info_and_clear(runs, tmp_path):
     cache = tmp_path / "cache"
     shutil.copytree(runs["root"] / "cache", cache)
     info = json.loads(arsim("cache", "info", "--cache", cache, "--json").stdout)
-    assert set(info["stages"]) == set(STAGES) and info["entries"] >= 9 and info["bytes"] > 0
+    # (the session's tracking has entries of its own)
+    assert set(info["stages"]) == set(STAGES) | {"tracking"} and info["entries"] >= 9 and info["bytes"] > 0
     assert info["stages"]["recording"]["entries"] == 1 and info["stages"]["capture"]["entries"] == 2
     r = arsim("cache", "clear", "--cache", cache)
     assert r.returncode == 0 and f"removed {info['entries']} entries" in r.stdout

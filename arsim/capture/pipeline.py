@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
@@ -20,7 +19,7 @@ from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
 from arsim.capture.response import RecoveredResponse, calibrate_response, photometric_response
 from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.errors import ArsimError
-from arsim.core.png import read_frame
+from arsim.core.png import read_frame, read_frames
 from arsim.scenario import Scenario
 from arsim.sensors.camera import SensorSettings, vignette
 from arsim.sensors.frames import frame_camera_orientations, recording_camera, recording_scenario  # (re-exported)
@@ -162,14 +161,13 @@ def accumulate_frames(rec: Recording, orientations: Rotation, response: Recovere
     accumulator = new_accumulator(size, camera, recording_falloff(rec, camera, sensor), sensor, len(levels))
     files, scales, gain = [rec.folder / f["file"] for f in rec.frames], exposure_scales(rec, sensor), gains(rec, sensor)
     times = np.array([f["t_ns"] for f in rec.frames]) / 1e9
-    with ThreadPoolExecutor(2) as readers:
-        for k, codes in enumerate(readers.map(read_frame, files)):
-            accumulator.add(codes, response.linear / scales[k], orientations[k].as_matrix(), scales[k],
-                            levels.index(bracket[k % len(bracket)]), gain[k])
-            if snapshots is not None and _second_ends(times, k):
-                snapshots.append((float(times[k] - times[0]), probe_snapshot(accumulator)))
-            if k % 30 == 0 or k == len(rec.frames) - 1:
-                progress((k + 1) / len(rec.frames), accumulator.coverage())
+    for k, codes in enumerate(read_frames(files)):
+        accumulator.add(codes, response.linear / scales[k], orientations[k].as_matrix(), scales[k],
+                        levels.index(bracket[k % len(bracket)]), gain[k])
+        if snapshots is not None and _second_ends(times, k):
+            snapshots.append((float(times[k] - times[0]), probe_snapshot(accumulator)))
+        if k % 30 == 0 or k == len(rec.frames) - 1:
+            progress((k + 1) / len(rec.frames), accumulator.coverage())
     return accumulator
 
 
@@ -205,30 +203,29 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     metered_small: dict[int, np.ndarray] = {}  # what the refinement's keyframes are taken from
     files = [rec.folder / f["file"] for f in rec.frames]
     scales, gain = exposure_scales(rec, sensor), gains(rec, sensor)
-    with ThreadPoolExecutor(2) as readers:  # PNG decoding releases the GIL: read ahead
-        for k, codes in enumerate(readers.map(read_frame, files)):
-            any_unclipped |= bool(np.any(codes < 255))
-            exposure_scale = scales[k]
-            drift.predict(k)
-            predicted = drift.correction() * uncorrected[k]
-            metered, index = divmod(k, len(bracket))
-            if index == 0 and settings.refine:
-                metered_small[k] = features.small(codes)
-            # Only metered frames are aligned: the bracketed ones are dark but for the highlights.
-            if settings.align_every and index == 0 and metered % settings.align_every == 0 and k > 0:
-                found = aligner.align(codes, accumulator, predicted.as_matrix(), exposure_scale)
-                # A match further from the prediction than the filter's uncertainty allows is a false match
-                # (few features, repeated patterns): it is dropped like a failed one.
-                if found.rotation is not None and drift.update(predicted * found.rotation):
-                    aligned[k] = True
-                    predicted = drift.correction() * uncorrected[k]
-            corrected.append(predicted)
-            accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale,
-                            exposure_levels.index(bracket[index]), gain[k])
-            if final_online and _second_ends(times, k):  # (the online probe is the final one: its growth kept)
-                online_snapshots.append((float(times[k] - times[0]), probe_snapshot(accumulator)))
-            if k % 30 == 0 or k == len(rec.frames) - 1:
-                progress((k + 1) / len(rec.frames) * (0.6 if settings.refine else 1.0), accumulator.coverage())
+    for k, codes in enumerate(read_frames(files)):  # (decoded ahead, overlapping the alignment)
+        any_unclipped |= bool(np.any(codes < 255))
+        exposure_scale = scales[k]
+        drift.predict(k)
+        predicted = drift.correction() * uncorrected[k]
+        metered, index = divmod(k, len(bracket))
+        if index == 0 and settings.refine:
+            metered_small[k] = features.small(codes)
+        # Only metered frames are aligned: the bracketed ones are dark but for the highlights.
+        if settings.align_every and index == 0 and metered % settings.align_every == 0 and k > 0:
+            found = aligner.align(codes, accumulator, predicted.as_matrix(), exposure_scale)
+            # A match further from the prediction than the filter's uncertainty allows is a false match
+            # (few features, repeated patterns): it is dropped like a failed one.
+            if found.rotation is not None and drift.update(predicted * found.rotation):
+                aligned[k] = True
+                predicted = drift.correction() * uncorrected[k]
+        corrected.append(predicted)
+        accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale,
+                        exposure_levels.index(bracket[index]), gain[k])
+        if final_online and _second_ends(times, k):  # (the online probe is the final one: its growth kept)
+            online_snapshots.append((float(times[k] - times[0]), probe_snapshot(accumulator)))
+        if k % 30 == 0 or k == len(rec.frames) - 1:
+            progress((k + 1) / len(rec.frames) * (0.6 if settings.refine else 1.0), accumulator.coverage())
     if not any_unclipped:
         raise ArsimError(f"{rec.folder}: every frame is saturated (all codes 255); nothing can be captured from it")
     online = Rotation.concatenate(corrected)

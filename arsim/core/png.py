@@ -12,7 +12,9 @@ on standard error for a corrupted file, which would break a refusal's one line.
 
 from __future__ import annotations
 
+import collections
 import struct
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import cv2
@@ -133,3 +135,18 @@ def read_frame(path: Path) -> np.ndarray:
         raise ArsimError(f"{path}: cannot be read as an 8-bit image; give 8-bit PNG files (a recording's frame: "
                          "record it again)")
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def read_frames(paths: Iterable[Path], workers: int = 2, ahead: int = 8) -> Iterator[np.ndarray]:
+    """read_frame of each path in order, decoded ahead on `workers` threads (the checks and OpenCV's decoding
+    release the GIL, so they overlap the caller's work), at most `ahead` frames held at once."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pending = collections.deque()
+    with ThreadPoolExecutor(workers) as pool:
+        for path in paths:
+            pending.append(pool.submit(read_frame, path))
+            if len(pending) > ahead:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()

@@ -60,9 +60,13 @@ class FrameLoop:
 
     def __init__(self, ctx, tracker: TagTracker, renderer: Renderer, shading: Shading = Shading(), overlay: bool = False,
                  maps_label: str = "", baker: LoopBaker | None = None, budget_ms: float = 33.3,
-                 pose_cache: dict[int, TagPose] | None = None, lights: Sequence[np.ndarray] = (), light_frames: int = 1):
+                 pose_cache: dict[int, TagPose] | None = None, lights: Sequence[np.ndarray] = (), light_frames: int = 1,
+                 tracked: dict[int, tuple[TagPose, float]] | None = None):
         self.ctx, self.tracker, self.renderer, self.shading = ctx, tracker, renderer, shading
         self.pose_cache = pose_cache  # a recording's frames seen again (a loop over its path): their poses
+        # The same frames tracked before by the same tracker (a run's reused tracking): per frame its pose and
+        # the CPU ms that tracking took, recorded as step "track" (the tracker is deterministic).
+        self.tracked = tracked
         self.overlay, self.maps_label, self.baker, self.budget_ms = overlay, maps_label, baker, budget_ms
         self.query = ctx.query(time=True)
         self.origin = None
@@ -108,6 +112,12 @@ class FrameLoop:
         """The tracker's pose for a frame (timed as step "track" into record), or the one kept for it."""
         if self.pose_cache is not None and index in self.pose_cache:
             return self.pose_cache[index]
+        if self.tracked is not None and index in self.tracked:
+            pose, ms = self.tracked[index]
+            if record is not None:
+                record.step_start_ms["track"] = 1000 * (time.perf_counter() - self.origin)
+                record.cpu_ms["track"] = ms
+            return pose
         poses = []
         if record is None:
             poses.append(self.tracker.track(frame, index))

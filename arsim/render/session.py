@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from arsim.core.png import read_frame
+from arsim.core.png import read_frame, read_frames
 from arsim.core.errors import ArsimError
 from arsim.core.tags import DEFAULT_DETECTOR
 from arsim.core.files import atomic_path, write_bytes_atomic
@@ -70,6 +70,10 @@ class SessionResult:
     estimate_scores: dict = field(default_factory=dict)  # estimator -> {frame index: score}
     scored: bool = True  # whether truth frames were rendered and scored (False: the true environment is unknown)
 
+    def tracked(self) -> dict[int, tuple[TagPose, float]]:
+        """Per frame rendered: its pose and the CPU ms its tracking took (run_session's `tracked`)."""
+        return {int(k): (pose, record.cpu_ms["track"]) for k, pose, record in zip(self.frames, self.poses, self.records)}
+
 
 def maps_needed(objects: Sequence[SceneObject], method: str) -> dict[str, list[float]]:
     """Per map method, the exponents the objects' materials need (1: the irradiance map); materials that
@@ -115,7 +119,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                 objects: list[SceneObject], score: Scorer, settings: SessionSettings = SessionSettings(),
                 truth_objects: list[SceneObject] | None = None,
                 progress: Callable[[float], None] = lambda fraction: None,
-                estimates: dict[str, tuple[dict[str, MapSet], list[SceneObject]]] | None = None) -> SessionResult:
+                estimates: dict[str, tuple[dict[str, MapSet], list[SceneObject]]] | None = None,
+                tracked: dict[int, tuple[TagPose, float]] | None = None) -> SessionResult:
     """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
     (a set per method: from the captured probe, or baked before) and truth frames lit by
     `truth_maps` (the same from the true environment), each frame scored against its truth frame by
@@ -123,7 +128,9 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     flip all NaN, estimate_frames without a truth frame); writes frames/*.png and session.mp4 into out_dir. truth_objects: the objects as the truth
     frames show them, where their directional light maps were baked from the true environment
     (light_objects); default: `objects`. estimates: per light estimator, its maps and objects (estimate.lit);
-    at the saved frames the objects are also rendered lit by each, scored against the truth frame likewise."""
+    at the saved frames the objects are also rendered lit by each, scored against the truth frame likewise.
+    tracked: the frames' poses and tracking times from an earlier session over the same recording with the same
+    tracker (SessionResult.tracked gives them), which are not tracked again."""
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code, settings)
     captured = _renderer(camera, maps, ctx, settings.method, objects)
@@ -141,11 +148,12 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     fps = rec.meta["camera"].get("fps", 30.0) / settings.every
     shading = Shading(settings.key, settings.white, settings.log_average)
     loop = FrameLoop(ctx, tracker, captured, shading, settings.overlay, settings.method, lights=settings.lights,
-                     light_frames=count)
+                     light_frames=count, tracked=tracked)
     with atomic_path(out_dir / "session.mp4") as video_path:
         video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
-        for n, k in enumerate(indices):
-            frame, time_s = read_frame(rec.folder / rec.frames[k]["file"]), frame_time_s(rec, k)
+        frames = read_frames(rec.folder / rec.frames[k]["file"] for k in indices)  # (decoded ahead of the loop)
+        for n, (k, frame) in enumerate(zip(indices, frames)):
+            time_s = frame_time_s(rec, k)
             pose, record = loop.run(frame, int(k), time_s)
             poses.append(pose)
             records.append(record)

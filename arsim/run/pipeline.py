@@ -140,6 +140,52 @@ def stage_keys(scenario: Scenario, source: str, content: str, objects: list) -> 
     return keys
 
 
+# The tracker's code: the session reuses the frames' poses where the recording, the response, [ar]'s tracker
+# settings and this code are the same (a change in [render] alone renders again without tracking again).
+TRACKING_CODE = ("arsim.tracking.fusion", "arsim.tracking.apriltag", "arsim.tracking.detectors", "arsim.render.loop")
+
+
+def tracking_key(scenario: Scenario, capture_key: str, every: int) -> str:
+    """The key of the session's tracking: the capture's key (the recording and the response that linearises the
+    frames), [ar]'s tracker settings, the frames tracked (every k-th) and the tracker's code."""
+    return key_of("tracking", {"capture": capture_key, "ar": {k: getattr(scenario.ar, k) for k in AR_SESSION_ONLY},
+                               "every": every, "code": code_digest(TRACKING_CODE, RUN_FILES)})
+
+
+def _save_tracked(tracked: dict, folder: Path) -> None:
+    """The session's poses per frame (render.session.SessionResult.tracked) as arrays; None as NaN."""
+    k = sorted(tracked)
+    poses = [tracked[i][0] for i in k]
+    nan = np.full((3, 3), np.nan)
+    write_state(folder, None, {
+        "frames": np.asarray(k, np.int64), "track_ms": np.asarray([tracked[i][1] for i in k], np.float64),
+        "found": np.asarray([p.found for p in poses]),
+        "rotation": np.stack([p.rotation if p.found else nan for p in poses]) if poses else np.zeros((0, 3, 3)),
+        "translation": np.stack([p.translation if p.found else nan[0] for p in poses]) if poses else np.zeros((0, 3)),
+        "corners": np.stack([p.corners if p.corners is not None else np.full((4, 2), np.nan) for p in poses])
+        if poses else np.zeros((0, 4, 2)),
+        "has_corners": np.asarray([p.corners is not None for p in poses]),
+        "extrapolated": np.asarray([p.extrapolated for p in poses]),
+        "since_tag_s": np.asarray([p.since_tag_s for p in poses], np.float64),
+        "sigma_rotation_deg": np.asarray([np.nan if p.sigma_rotation_deg is None else p.sigma_rotation_deg for p in poses]),
+        "sigma_position_m": np.asarray([np.nan if p.sigma_position_m is None else p.sigma_position_m for p in poses])})
+
+
+def _load_tracked(folder: Path) -> dict:
+    from arsim.tracking.apriltag import TagPose
+
+    _, a = read_state(folder)
+    tracked = {}
+    for n, k in enumerate(a["frames"]):
+        found = bool(a["found"][n])
+        sigma_r, sigma_p = float(a["sigma_rotation_deg"][n]), float(a["sigma_position_m"][n])
+        pose = TagPose(a["rotation"][n] if found else None, a["translation"][n] if found else None,
+                       a["corners"][n] if a["has_corners"][n] else None, bool(a["extrapolated"][n]),
+                       float(a["since_tag_s"][n]), None if np.isnan(sigma_r) else sigma_r, None if np.isnan(sigma_p) else sigma_p)
+        tracked[int(k)] = (pose, float(a["track_ms"][n]))
+    return tracked
+
+
 def _recorded_settings(scenario: Scenario | None) -> dict | None:
     """What of the scenario a recording carries (its meta.json's scenario_toml) the later stages read: the
     recording's settings and all of [capture] (the capture takes its settings from the recording)."""
@@ -427,16 +473,24 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
 
     # 5. The AR session over the AR path (the objects also lit by each light estimate at the frames shown),
     # its render-loop profile, and the frames lit by each estimate.
+    tracked_as: dict = {}  # (the session's tracking: reused or computed, for the manifest)
+
     def make_session(description):
         session_settings = with_scenario(SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay,
                                                          flip_every=r.flip_every), scenario,
                                          [light for _, light in captured.snapshots])
+        tracked_as["key"] = tracking_key(scenario, keys["capture"], session_settings.every)
+        hit = cache.lookup("tracking", tracked_as["key"])
+        tracked_as["status"] = "reused" if hit is not None else "computed"
         with step("session", description) as update:
             session = run_session(ar, captured.response.linear[:, 1], maps, baked["truth_maps"] if truth is not None else None,
                                   out, light_objects(objects, probe), masked_flip, session_settings,
                                   truth_objects=light_objects(objects, truth) if truth is not None else None,
                                   progress=lambda f: update(completed=f),
-                                  estimates=estimate_lights(estimates.final, needed, objects, r.map_size))
+                                  estimates=estimate_lights(estimates.final, needed, objects, r.map_size),
+                                  tracked=_load_tracked(hit.state) if hit is not None else None)
+            if hit is None:
+                cache.store("tracking", tracked_as["key"], out, [], lambda folder: _save_tracked(session.tracked(), folder))
             (out / "profile").mkdir(exist_ok=True)
             write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")
             write_estimate_frames(session.estimate_frames, out / "estimates" / "frames")
@@ -445,6 +499,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
                 "tracking": TrackingFigures(tracking.found, tracking.rot_err_deg, tracking.trans_err_pct)}
 
     session, _ = stages.run("session", keys["session"], "5/6 rendering the AR session", make_session, _save_session, _load_session)
+    if tracked_as:  # (the session computed: its tracking reused from a session of other [render] settings, or done now)
+        stages.record["session"]["tracking"] = tracked_as
 
     # 6. Metrics, report and manifest.
     metrics = {"capture": {k: v for k, v in captured.metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},

@@ -170,7 +170,7 @@ def single_frame_estimates(rec: Recording, response, progress=lambda fraction: N
     highlights) are not what a phone's preview shows its light estimation; they keep the estimate of the
     metered frame before them."""
     from arsim.capture.pipeline import exposure_scales, fused_camera_orientations
-    from arsim.core.png import read_frame
+    from arsim.core.png import read_frames
     from arsim.estimate.single_frame import SingleFrameEstimator
     from arsim.sensors.frames import recording_camera
 
@@ -179,12 +179,15 @@ def single_frame_estimates(rec: Recording, response, progress=lambda fraction: N
     scales = exposure_scales(rec, SensorSettings.of(scenario.device.camera))
     bracket = scenario.capture.bracket_ev  # frame k was taken at bracket[k % len]; 0: metered
     views = fused_camera_orientations(rec).as_matrix()
+    metered = [k for k in range(len(rec.frames)) if bracket[k % len(bracket)] == 0 or k == 0]
+    estimated = set(metered)
+    frames = read_frames(rec.folder / rec.frames[k]["file"] for k in metered)  # (decoded ahead, in this order)
     out = []
-    for k, f in enumerate(rec.frames):
-        if bracket[k % len(bracket)] != 0 and out:
+    for k in range(len(rec.frames)):
+        if k not in estimated:
             out.append(out[-1])
             continue
-        out.append(estimator.estimate(read_frame(rec.folder / f["file"]), response.linear / scales[k], views[k]))
+        out.append(estimator.estimate(next(frames), response.linear / scales[k], views[k]))
         if k % 50 == 0:
             progress(k / len(rec.frames))
     return out
