@@ -21,6 +21,8 @@ the helpers at the end of this module. Rotations: scipy.spatial.transform.Rotati
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 
 import cv2
@@ -145,9 +147,17 @@ def anglemap_st_to_pixel(st: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray
     return row, col
 
 
+@functools.lru_cache(maxsize=16)
+def _texel_radius(n: int) -> np.ndarray:
+    """anglemap_radius of every texel centre of an N x N angle map, computed once per N (read-only)."""
+    rho = anglemap_radius(anglemap_texel_st(n))
+    rho.flags.writeable = False
+    return rho
+
+
 def anglemap_disk_mask(n: int) -> np.ndarray:
     """True for texels whose centre lies inside the unit disk (rho < 1), shape (N, N)."""
-    return anglemap_radius(anglemap_texel_st(n)) < 1.0
+    return _texel_radius(n) < 1.0
 
 
 def anglemap_directions(n: int) -> np.ndarray:
@@ -157,7 +167,7 @@ def anglemap_directions(n: int) -> np.ndarray:
 
 def anglemap_solid_angles(n: int) -> np.ndarray:
     """Solid angle of every texel, (2 pi / N)^2 sinc(pi rho), 0 outside the disk; sums to ~4 pi."""
-    rho = anglemap_radius(anglemap_texel_st(n))
+    rho = _texel_radius(n)
     w = (2.0 * np.pi / n) ** 2 * np.sinc(rho)  # numpy's sinc(x) is sin(pi x) / (pi x)
     return np.where(rho < 1.0, w, 0.0)
 
