@@ -28,7 +28,6 @@ from arsim.core.resample import extend_beyond_rim
 from arsim.lighting.bases import parse_basis
 from arsim.lighting.mapset import MapSet
 from arsim.render.meshes import Mesh
-from arsim.render.shading import TONEMAP_LUMA
 
 
 def _shader(name: str) -> str:
@@ -168,16 +167,26 @@ class _Drawable:
     prt: tuple | None = None  # (the material, the coefficients' buffer (vertex) or texture array (texel))
 
 
+# The tone mapper's average is summed in blocks of this many pixels a side, over the objects' rectangles
+# only, into a target this many times smaller than the tile, whose mip chain gives the mean: on llvmpipe
+# the RGBA16F mip chain of a whole tile took 3 ms a frame (median; 13 at worst), the tile's mostly the
+# space between the objects.
+AVERAGE_BLOCK = 4
+
+
 @dataclass
 class _Tile:
     """The render targets of one tile size: HDR colour (alpha: coverage), mask (its second channel:
-    log(delta + L_w) where it is set), depth, and with debug the shading vectors."""
+    log(delta + L_w) where it is set), depth, and with debug the shading vectors; and the tone mapper's
+    average target (a texel per AVERAGE_BLOCK² pixels: the block's mean luminance or log, its coverage)."""
 
     hdr: object
     mask: object
     fbo: object
     clear_fbo: object  # the mask and the depth (and the debug targets): what clears fast
     zeros: bytes  # an HDR tile of zeros
+    average: object
+    average_fbo: object
     debug: list = field(default_factory=list)
     dirty: tuple[int, int] = (0, 0)  # the HDR colour's lower-left part written since it was zeroed
 
@@ -587,7 +596,9 @@ class Renderer:
             depth = self.ctx.depth_renderbuffer(size)
             fbo = self.ctx.framebuffer([hdr, mask, *debug], depth)
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)  # (a new texture's content is undefined)
-            self.tiles[size] = _Tile(hdr, mask, fbo, self.ctx.framebuffer([mask, *debug], depth), bytes(size[0] * size[1] * 8), debug)
+            average = self.ctx.texture((size[0] // AVERAGE_BLOCK, size[1] // AVERAGE_BLOCK), 2, dtype="f4")
+            self.tiles[size] = _Tile(hdr, mask, fbo, self.ctx.framebuffer([mask, *debug], depth), bytes(size[0] * size[1] * 8),
+                                     average, self.ctx.framebuffer([average]), debug)
         return self.tiles[size]
 
     def no_objects(self) -> None:
@@ -636,14 +647,41 @@ class Renderer:
         self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
 
     def _tonemapper(self, log_average: bool):
+        """The average's program and the tone mapper's, for the mean or the log-average."""
         if log_average not in self.tonemappers:
             defines = ["LOG_AVERAGE"] if log_average else []
+            average = self.ctx.program(vertex_shader=_source("blocks.vert", []),
+                                       fragment_shader=_source("average.frag", defines + [f"BLOCK {AVERAGE_BLOCK}"]))
             program = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=_source("tonemap.frag", defines))
-            self.tonemappers[log_average] = program
+            self.tonemappers[log_average] = (average, program)
         return self.tonemappers[log_average]
 
     def top_level(self) -> int:
-        return int(np.log2(max(self.tile.hdr.width, self.tile.hdr.height)))
+        return int(np.log2(max(self.tile.average.width, self.tile.average.height)))
+
+    def _draw_rects(self, program, rects: np.ndarray) -> None:
+        """Two triangles per rectangle (x0, y0, x1, y1) with the program, into the framebuffer in use."""
+        corners = np.array([[(x0, y0), (x1, y0), (x0, y1), (x0, y1), (x1, y0), (x1, y1)] for x0, y0, x1, y1 in rects], dtype="f4")
+        vbo = self.ctx.buffer(corners.tobytes())
+        vao = self.ctx.vertex_array(program, [(vbo, "2f", "in_corner")])
+        vao.render()
+        vao.release()
+        vbo.release()
+
+    def _average_pass(self, program) -> None:
+        """The masked pixels' average into the top of the tile's average chain: the blocks that hold the
+        objects' rectangles summed into the average target (zeros elsewhere), then its mip chain."""
+        tile, b = self.tile, AVERAGE_BLOCK
+        tile.average_fbo.use()
+        tile.average_fbo.clear(0.0, 0.0, 0.0, 0.0)
+        x0, y0 = self.rect[:2]
+        rects = np.array([(x - x0, y - y0, x - x0 + w, y - y0 + h) for x, y, w, h in self.rects])
+        blocks = np.hstack([rects[:, :2] // b, -(-rects[:, 2:] // b)])  # grown to whole blocks
+        tile.hdr.use(0)
+        program["hdr"].value = 0
+        program["target_size"].value = tile.average.size
+        self._draw_rects(program, blocks)
+        tile.average.build_mipmaps()
 
     def tonemap(self, background: np.ndarray, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> np.ndarray:
         """Steps 4 and 6: the camera frame (H, W, 3) uint8 with Reinhard's operator on the masked pixels
@@ -661,14 +699,11 @@ class Renderer:
         """Step 6: the tone-mapped objects over the output's background, without reading it back."""
         if self.tile is None:
             return
-        self.tile.hdr.build_mipmaps()  # its alpha is the mask's coverage
-        if log_average:
-            self.tile.mask.build_mipmaps()  # its second channel: log(delta + L_w) of the masked pixels
-        program = self._tonemapper(log_average)
-        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("mask", self.tile.mask)]):
-            if name in program:  # the mask's log channel: only the log-average reads it
-                tex.use(unit)
-                program[name].value = unit
+        average, program = self._tonemapper(log_average)
+        self._average_pass(average)
+        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("average", self.tile.average)]):
+            tex.use(unit)
+            program[name].value = unit
         program["key"].value, program["white"].value = key, white
         program["top_level"].value = self.top_level()
         program["origin"].value = self.rect[:2]
@@ -676,14 +711,8 @@ class Renderer:
         program["frame_height"].value = self.camera.height
         # Only the objects' own rectangles (two triangles each; where they overlap, a pixel is mapped twice
         # to the same value): a fraction of their union, which holds the space between them.
-        corners = np.array([[(x, y), (x + w, y), (x, y + h), (x, y + h), (x + w, y), (x + w, y + h)]
-                            for x, y, w, h in self.rects], dtype="f4")
-        vbo = self.ctx.buffer(corners.tobytes())
         self.output_fbo.use()
-        vao = self.ctx.vertex_array(program, [(vbo, "2f", "in_corner")])
-        vao.render()
-        vao.release()
-        vbo.release()
+        self._draw_rects(program, np.array([(x, y, x + w, y + h) for x, y, w, h in self.rects]))
 
     def overlay_pass(self, lines: Sequence[str], thumbnail=None) -> None:
         """Step 7: the user interface, lines of text (frame time, bake progress) in a translucent box at
@@ -767,8 +796,5 @@ class Renderer:
     def mip_average(self, log_average: bool = False) -> float:
         """The average luminance of the masked pixels as the tone mapper reads it from the mip tops (after
         a tonemap pass with the same log_average)."""
-        top = self.top_level()
-        mean = self._read(self.tile.hdr, 4, "f2", top)[0, 0]
-        if log_average:
-            return float(np.exp(self._read(self.tile.mask, 2, "f2", top)[0, 0, 1] / max(mean[3], 1e-12)))
-        return float(mean[:3] @ TONEMAP_LUMA / max(mean[3], 1e-12))
+        value, coverage = self._read(self.tile.average, 2, "f4", self.top_level())[0, 0]
+        return float(np.exp(value / coverage) if log_average else value / max(coverage, 1e-12))
