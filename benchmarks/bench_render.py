@@ -9,7 +9,7 @@ by frame with the renderer's, drawn as cheaply as the steps can be drawn at all,
 two medians per step:
   4  the camera frame uploaded as RGBA already (no conversion);
   5  the same tile, clear and depth test, each object's coarsest geometry (a ray-cast sphere's quad, a
-     mesh's coarsest level of detail) with a shader that writes a constant colour and mask;
+     mesh's coarsest level of detail) with a shader that writes a constant colour (its alpha the mask);
   6  one pass over the same rectangles that copies the HDR colour where it is set (no average, no
      operator);
   7  the same box blended from a texture already uploaded (no text drawn).
@@ -43,11 +43,9 @@ void main() { gl_Position = view_projection * (model * vec4(in_position, 1.0)); 
 FLOOR_FRAG = """#version 430
 uniform vec3 eye;  // (set by render_objects: kept by a branch the compiler cannot drop)
 layout(location = 0) out vec4 hdr;
-layout(location = 1) out vec4 mask;
 void main() {
     hdr = vec4(0.5, 0.5, 0.5, 1.0);
     if (eye.x > 1e30) hdr.r = 0.0;
-    mask = vec4(1.0, -0.7, 0.0, 0.0);
 }
 """
 COPY_FRAG = """#version 430

@@ -176,29 +176,30 @@ AVERAGE_BLOCK = 4
 
 @dataclass
 class _Tile:
-    """The render targets of one tile size: HDR colour (alpha: coverage), mask (its second channel:
-    log(delta + L_w) where it is set), depth, and with debug the shading vectors; and the tone mapper's
-    average target (a texel per AVERAGE_BLOCK² pixels: the block's mean luminance or log, its coverage)."""
+    """The render targets of one tile size: HDR colour (its alpha the mask: 1 where an object was drawn),
+    depth, and with debug the shading vectors; and the tone mapper's average target (a texel per
+    AVERAGE_BLOCK² pixels: the block's mean luminance or log, its coverage)."""
 
     hdr: object
-    mask: object
     fbo: object
-    clear_fbo: object  # the mask and the depth (and the debug targets): what clears fast
+    clear_fbo: object  # the depth (and the debug targets): what clears fast
     zeros: bytes  # an HDR tile of zeros
     average: object
     average_fbo: object
     debug: list = field(default_factory=list)
-    dirty: tuple[int, int] = (0, 0)  # the HDR colour's lower-left part written since it was zeroed
+    dirty: list = field(default_factory=list)  # the rectangles (x, y, w, h) written since the tile was zeroed
 
-    def clear(self, width: int, height: int) -> None:
-        """Clear for a frame whose rectangle is width x height. llvmpipe clears 64-bit pixels (RGBA16F)
-        through a slow path, 3 to 5 times what uploading zeros takes: the HDR colour gets zeros uploaded
-        over the part the last frame wrote, the 32-bit targets a clear."""
-        self.clear_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        w, h = self.dirty
-        if w and h:
-            self.hdr.write(memoryview(self.zeros)[:w * h * 8], viewport=(0, 0, w, h))
-        self.dirty = (width, height)
+    def clear(self, rects: list[tuple[int, int, int, int]]) -> None:
+        """Clear for a frame whose objects lie in rects (tile pixels): the rectangles the last frame wrote,
+        so that the whole tile is zero again (a tile's pixels are written only inside its frame's
+        rectangles). llvmpipe clears 64-bit pixels (RGBA16F) through a slow path, 3 to 5 times what
+        uploading zeros takes: the HDR colour gets zeros uploaded, the depth a clear; and over the
+        objects' own rectangles, not the space between them that their union holds."""
+        for x, y, w, h in self.dirty:
+            self.clear_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=(x, y, w, h))
+            self.hdr.write(memoryview(self.zeros)[:w * h * 8], viewport=(x, y, w, h))
+        width, height = self.hdr.size
+        self.dirty = [(x, y, min(w, width - x), min(h, height - y)) for x, y, w, h in rects if x < width and y < height]
 
 
 def texel_length(mesh: Mesh, uvs: np.ndarray, texture_size: int) -> float:
@@ -591,13 +592,13 @@ class Renderer:
         size = (min(_power_of_two(width), _power_of_two(self.camera.width)),
                 min(_power_of_two(height), _power_of_two(self.camera.height)))
         if size not in self.tiles:
-            hdr, mask = self.ctx.texture(size, 4, dtype="f2"), self.ctx.texture(size, 2, dtype="f2")
+            hdr = self.ctx.texture(size, 4, dtype="f2")
             debug = [self.ctx.texture(size, 4, dtype="f4") for _ in range(2)] if self.debug else []
             depth = self.ctx.depth_renderbuffer(size)
-            fbo = self.ctx.framebuffer([hdr, mask, *debug], depth)
+            fbo = self.ctx.framebuffer([hdr, *debug], depth)
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)  # (a new texture's content is undefined)
             average = self.ctx.texture((size[0] // AVERAGE_BLOCK, size[1] // AVERAGE_BLOCK), 2, dtype="f4")
-            self.tiles[size] = _Tile(hdr, mask, fbo, self.ctx.framebuffer([mask, *debug], depth), bytes(size[0] * size[1] * 8),
+            self.tiles[size] = _Tile(hdr, fbo, self.ctx.framebuffer(debug, depth), bytes(size[0] * size[1] * 8),
                                      average, self.ctx.framebuffer([average]), debug)
         return self.tiles[size]
 
@@ -623,7 +624,7 @@ class Renderer:
         x, y, w, h = self.rect
         self.tile = self._tile(w, h)
         self.tile.fbo.use()
-        self.tile.clear(w, h)
+        self.tile.clear([(rx - x, ry - y, rw, rh) for rx, ry, rw, rh in self.rects])
         self.tile.fbo.viewport = (-x, -y, self.camera.width, self.camera.height)  # the rectangle's corner at the tile's
         self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)  # closed meshes: their back faces are hidden
         depths = np.maximum((self.corners @ view_projection.T)[..., 3].min(axis=1), self.near)  # nearest points
@@ -787,7 +788,8 @@ class Renderer:
         return self._read_tile("hdr", 4, "f2")[..., :3]
 
     def read_mask(self) -> np.ndarray:
-        return self._read_tile("mask", 2, "f2")[..., 0]
+        """(H, W) 1 where an object was drawn, 0 elsewhere: the HDR colour's alpha."""
+        return self._read_tile("hdr", 4, "f2")[..., 3]
 
     def read_debug(self) -> tuple[np.ndarray, np.ndarray]:
         """(normal (H, W, 4): the shaded normal and the light-map value in w, incident (H, W, 4))."""
