@@ -79,7 +79,8 @@ class FloorRenderer(Renderer):
             vao = self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.positions.astype("f4").tobytes()), "3f", "in_position")],
                                         self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes()))
         d.program, d.vaos, d.errors, d.units, d.texel_world = program, [vao], np.zeros(1), [], {}
-        self.copy = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=COPY_FRAG)
+        if not hasattr(self, "copy"):
+            self.copy = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=COPY_FRAG)
 
     def background_pass(self, rgba: np.ndarray) -> None:
         self.output.write(rgba)
@@ -92,14 +93,8 @@ class FloorRenderer(Renderer):
         self.copy["origin"].value = self.rect[:2]
         self.copy["frame_size"].value = (self.camera.width, self.camera.height)
         self.copy["frame_height"].value = self.camera.height
-        corners = np.array([[(x, y), (x + w, y), (x, y + h), (x, y + h), (x + w, y), (x + w, y + h)]
-                            for x, y, w, h in self.rects], dtype="f4")
-        vbo = self.ctx.buffer(corners.tobytes())
         self.output_fbo.use()
-        vao = self.ctx.vertex_array(self.copy, [(vbo, "2f", "in_corner")])
-        vao.render()
-        vao.release()
-        vbo.release()
+        self._draw_rects(self.copy, np.array([(x, y, x + w, y + h) for x, y, w, h in self.rects]))
 
     def overlay_pass(self, image: np.ndarray) -> None:
         if self.overlay_program is None:

@@ -168,10 +168,11 @@ class _Drawable:
 
 
 # The tone mapper's average is summed in blocks of this many pixels a side, over the objects' rectangles
-# only, into a target this many times smaller than the tile, whose mip chain gives the mean: on llvmpipe
-# the RGBA16F mip chain of a whole tile took 3 ms a frame (median; 13 at worst), the tile's mostly the
-# space between the objects.
-AVERAGE_BLOCK = 4
+# only, into a target this many times smaller on each side than the tile, whose mip chain gives the mean:
+# on llvmpipe the RGBA16F mip chain of a whole tile took 3 ms a frame (median; 13 at worst), the tile
+# mostly the space between the objects; the blocks and their chain take 0.5-1 ms (8 measured a little
+# faster than 4: fewer fragments, a shorter chain).
+AVERAGE_BLOCK = 8
 
 
 @dataclass
@@ -262,6 +263,7 @@ class Renderer:
         self._rgba = np.empty((camera.height, camera.width, 4), np.uint8)
         self.output_fbo = self.ctx.framebuffer([self.output])
         self.tonemappers = {}
+        self._rect_arrays = {}  # per program (by id: each is kept in tonemappers), the rectangles' buffer and vertex array
         self._ggx_cache = {}  # GGX materials' prefiltered cube maps (per chain) and the split sum's table
         self._cube_writer = None
         self.overlay_program = None
@@ -653,7 +655,8 @@ class Renderer:
             defines = ["LOG_AVERAGE"] if log_average else []
             average = self.ctx.program(vertex_shader=_source("blocks.vert", []),
                                        fragment_shader=_source("average.frag", defines + [f"BLOCK {AVERAGE_BLOCK}"]))
-            program = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=_source("tonemap.frag", defines))
+            program = self.ctx.program(vertex_shader=_source("rects.vert", defines + ["AVERAGE"]),
+                                       fragment_shader=_source("tonemap.frag", defines))
             self.tonemappers[log_average] = (average, program)
         return self.tonemappers[log_average]
 
@@ -661,13 +664,20 @@ class Renderer:
         return int(np.log2(max(self.tile.average.width, self.tile.average.height)))
 
     def _draw_rects(self, program, rects: np.ndarray) -> None:
-        """Two triangles per rectangle (x0, y0, x1, y1) with the program, into the framebuffer in use."""
+        """Two triangles per rectangle (x0, y0, x1, y1) with the program, into the framebuffer in use. The
+        corners go into a buffer kept per program (grown when a frame has more rectangles): on llvmpipe a
+        buffer and a vertex array made and released per draw cost 0.1-0.15 ms."""
         corners = np.array([[(x0, y0), (x1, y0), (x0, y1), (x0, y1), (x1, y0), (x1, y1)] for x0, y0, x1, y1 in rects], dtype="f4")
-        vbo = self.ctx.buffer(corners.tobytes())
-        vao = self.ctx.vertex_array(program, [(vbo, "2f", "in_corner")])
-        vao.render()
-        vao.release()
-        vbo.release()
+        vbo, vao = self._rect_arrays.get(id(program), (None, None))
+        if vbo is None or vbo.size < corners.nbytes:
+            if vbo is not None:
+                vao.release()
+                vbo.release()
+            vbo = self.ctx.buffer(reserve=max(corners.nbytes, 64 * 48))
+            vao = self.ctx.vertex_array(program, [(vbo, "2f", "in_corner")])
+            self._rect_arrays[id(program)] = (vbo, vao)
+        vbo.write(corners.tobytes())
+        vao.render(vertices=6 * len(rects))
 
     def _average_pass(self, program) -> None:
         """The masked pixels' average into the top of the tile's average chain: the blocks that hold the

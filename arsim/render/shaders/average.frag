@@ -3,9 +3,9 @@
 // zero elsewhere), writing (the block's mean luminance or, with LOG_AVERAGE, the mean of log(delta +
 // L_w) over its drawn texels, the block's coverage). The target's mip chain then gives the means over
 // the tile: the masked pixels' average is its top's first channel over its second, the same value as a
-// mip chain over the whole tile (renderer.py). Without LOG_AVERAGE, four bilinear fetches at the corners
-// shared by 2 x 2 texels read the whole 4 x 4 block (weights of exactly 1/2: exact in float and in a
-// GPU's 8-bit weights); the log is not linear, so the log-average reads the texels one by one.
+// mip chain over the whole tile (renderer.py). Without LOG_AVERAGE, bilinear fetches at the corners
+// shared by 2 x 2 texels read the block a quarter of the fetches (weights of exactly 1/2: exact in float
+// and in a GPU's 8-bit weights); the log is not linear, so the log-average reads the texels one by one.
 uniform sampler2D hdr;
 
 out vec4 average;
