@@ -340,3 +340,20 @@ def test_an_object_that_moves_is_drawn_where_its_orbit_has_it(gl, maps, impostor
         np.testing.assert_array_equal(moving, still)
     # (the two times differ: the test sees the motion)
     assert not np.array_equal(frame(np.zeros(3), orbit, 0.0)[0], frame(np.zeros(3), orbit, 1.0)[0])
+
+
+def test_rectangles_side_by_side_merge_and_rectangles_apart_do_not():
+    from arsim.render.renderer import merge_rects
+
+    row = [(100 + 70 * k, 500 + k % 2, 75, 80) for k in range(10)]  # a row of spheres' rectangles, overlapping
+    apart = (400, 100, 300, 250)
+    merged = merge_rects(row + [apart])
+    assert merged == [(100, 500, 705, 81), apart]
+    assert merge_rects([(0, 0, 10, 10), (30, 0, 10, 10)]) == [(0, 0, 10, 10), (30, 0, 10, 10)]  # 40 x 10 over 200 covered
+    covered = np.zeros((800, 1000), bool)
+    for x, y, w, h in row + [apart]:
+        covered[y:y + h, x:x + w] = True
+    inside = np.zeros_like(covered)
+    for x, y, w, h in merged:
+        inside[y:y + h, x:x + w] = True
+    assert inside[covered].all() and inside.sum() <= 1.25 * covered.sum()
