@@ -81,6 +81,7 @@ class FloorRenderer(Renderer):
         d.program, d.vaos, d.errors, d.units, d.texel_world = program, [vao], np.zeros(1), [], {}
         if not hasattr(self, "copy"):
             self.copy = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=COPY_FRAG)
+            self.copy_vao = None
 
     def background_pass(self, rgba: np.ndarray) -> None:
         self.output.write(rgba)
@@ -93,8 +94,14 @@ class FloorRenderer(Renderer):
         self.copy["origin"].value = self.rect[:2]
         self.copy["frame_size"].value = (self.camera.width, self.camera.height)
         self.copy["frame_height"].value = self.camera.height
+        corners = np.array([[(x, y), (x + w, y), (x, y + h), (x, y + h), (x + w, y), (x + w, y + h)]
+                            for x, y, w, h in self.rects], dtype="f4")
+        if self.copy_vao is None:  # (a buffer kept, as the renderer keeps its own)
+            self.copy_vbo = self.ctx.buffer(reserve=64 * 48)
+            self.copy_vao = self.ctx.vertex_array(self.copy, [(self.copy_vbo, "2f", "in_corner")])
+        self.copy_vbo.write(corners.tobytes())
         self.output_fbo.use()
-        self._draw_rects(self.copy, np.array([(x, y, x + w, y + h) for x, y, w, h in self.rects]))
+        self.copy_vao.render(vertices=6 * len(self.rects))
 
     def overlay_pass(self, image: np.ndarray) -> None:
         if self.overlay_program is None:
