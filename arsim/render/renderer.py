@@ -1,12 +1,15 @@
 """The renderer's GL passes (moderngl), thesis 5.1 steps 4-7: the camera frame as the background, the
-virtual objects into an HDR colour target and a mask, the masked tone mapping, and the overlay.
+virtual objects into an HDR colour target whose alpha is the mask, the masked tone mapping, and the
+overlay.
 
 The objects are drawn into a tile: render targets a power of two on each side, just large enough for
 the objects' rectangle on the screen (their bounding boxes, projected), with the frame's viewport shifted
-so that the rectangle's corner lands on the tile's. Clearing the tile, its mip chain and the tone
-mapping then cost what the objects cover, not what the frame does (on llvmpipe, a 1280 x 720 RGBA16F
-clear and mip chain take 5 ms; a fullscreen pass 2 ms), and the powers of two make every mip level
-halve exactly, so that the top of the chain is the mean of the tile.
+so that the rectangle's corner lands on the tile's. Clearing the tile, the tone mapper's average and the
+tone mapping then cost what the objects cover, not what the frame does (on llvmpipe, a 1280 x 720
+RGBA16F clear and mip chain take 5 ms; a fullscreen pass 2 ms): each runs on the objects' own
+rectangles (merge_rects). The average is summed in blocks into a target AVERAGE_BLOCK times smaller on
+each side, also a power of two, so that every level of its mip chain halves exactly and its top is the
+mean of the tile.
 
 Images come back with row 0 at the top (OpenCV's convention); GL's framebuffer rows are bottom-up.
 """
