@@ -357,3 +357,19 @@ def test_rectangles_side_by_side_merge_and_rectangles_apart_do_not():
     for x, y, w, h in merged:
         inside[y:y + h, x:x + w] = True
     assert inside[covered].all() and inside.sum() <= 1.25 * covered.sum()
+
+
+def test_the_torus_levels_of_detail_depart_from_the_torus_by_what_they_state():
+    """Each coarser torus's stated departure bounds how far its triangles lie from the surface (at their
+    centres and edge midpoints) and is not loose (at most twice it); the steps are close, so that the
+    renderer's half-pixel limit picks a mesh little finer than it needs."""
+    from arsim.render.content import torus_distance, torus_lods
+
+    lods = torus_lods(0.05, 0.02, 96)
+    errors = np.array([e for _, e in lods])
+    assert (np.diff(errors) > 0).all() and (errors[1:] / errors[:-1]).max() < 1.6
+    for mesh, error in lods:
+        p = mesh.positions[mesh.indices].astype(np.float64)  # (T, 3, 3)
+        points = np.concatenate([p.mean(axis=1), ((p + np.roll(p, 1, axis=1)) / 2).reshape(-1, 3)])
+        departure = np.abs(torus_distance(points, 0.05, 0.02)).max()
+        assert 0.5 * error <= departure <= error * (1 + 1e-4)
