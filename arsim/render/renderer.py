@@ -697,8 +697,8 @@ class Renderer:
 
     def _draw_rects(self, program, rects: np.ndarray) -> None:
         """Two triangles per rectangle (x0, y0, x1, y1) with the program, into the framebuffer in use. The
-        corners go into a buffer kept per program (grown when a frame has more rectangles): on llvmpipe a
-        buffer and a vertex array made and released per draw cost 0.1-0.15 ms."""
+        corners go into a buffer kept per program (grown when a frame has more rectangles), not one made
+        and released per draw."""
         corners = np.array([[(x0, y0), (x1, y0), (x0, y1), (x0, y1), (x1, y0), (x1, y1)] for x0, y0, x1, y1 in rects], dtype="f4")
         vbo, vao = self._rect_arrays.get(id(program), (None, None))
         if vbo is None or vbo.size < corners.nbytes:
@@ -838,7 +838,8 @@ class Renderer:
         return tuple(self._read(t, 4, "f4") for t in self.tile.debug)
 
     def mip_average(self, log_average: bool = False) -> float:
-        """The average luminance of the masked pixels as the tone mapper reads it from the mip tops (after
-        a tonemap pass with the same log_average)."""
+        """The average luminance of the masked pixels as the tone mapper reads it from the top of the
+        tile's average chain (after a tonemap pass with the same log_average)."""
         value, coverage = self._read(self.tile.average, 2, "f4", self.top_level())[0, 0]
-        return float(np.exp(value / coverage) if log_average else value / max(coverage, 1e-12))
+        mean = value / max(coverage, 1e-12)
+        return float(np.exp(mean) if log_average else mean)
