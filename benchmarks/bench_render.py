@@ -1,10 +1,20 @@
 """Render speed at 1280 x 720 along the default scenario's AR path (prints figures; not a test): thesis
 5.1 steps 4-7 per frame, the camera frame as the background (4), the virtual objects into the HDR colour
-and the mask with IBL, light maps and normal maps (5), the masked tone mapping with its mip chain (6)
-and the overlay (7), each timed on the CPU around glFinish and with GL timer queries; median, p95 and
-max over the frames where the tag is in view (the look-away windows, which draw nothing, are left out).
+and the mask with IBL, light maps and normal maps (5), the masked tone mapping with its average (6) and
+the overlay (7), each timed on the CPU around glFinish and with GL timer queries; median, p95 and max
+over the frames where the tag is in view (the look-away windows, which draw nothing, are left out).
 
-    python benchmarks/bench_render.py [--frames N] [--width W --height H]
+Beside it, the floor: the same frames, at the same resolution, in the same context and interleaved frame
+by frame with the renderer's, drawn as cheaply as the steps can be drawn at all, and the ratio of the
+two medians per step:
+  4  the camera frame uploaded as RGBA already (no conversion);
+  5  the same tile, clear and depth test, each object's coarsest geometry (a ray-cast sphere's quad, a
+     mesh's coarsest level of detail) with a shader that writes a constant colour (its alpha the mask);
+  6  one pass over the same rectangles that copies the HDR colour where it is set (no average, no
+     operator);
+  7  the same box blended from a texture already uploaded (no text drawn).
+
+    python benchmarks/bench_render.py [--frames N] [--width W --height H] [--log-average]
 """
 
 import argparse
@@ -18,11 +28,97 @@ from arsim.core.gl import create_gl_context
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.lighting.fast import fast_maps
-from arsim.render.content import scene_objects
 from arsim.lighting.mapset import MapSet
-from arsim.render.renderer import Renderer
+from arsim.render.content import scene_objects
+from arsim.render.renderer import Renderer, _source, overlay_image
 from arsim.scenario.sections import Scenario
 from arsim.sensors.recording import ar_path
+
+FLOOR_VERT = """#version 430
+uniform mat4 model;
+uniform mat4 view_projection;
+in vec3 in_position;
+void main() { gl_Position = view_projection * (model * vec4(in_position, 1.0)); }
+"""
+FLOOR_FRAG = """#version 430
+uniform vec3 eye;  // (set by render_objects: kept by a branch the compiler cannot drop)
+layout(location = 0) out vec4 hdr;
+void main() {
+    hdr = vec4(0.5, 0.5, 0.5, 1.0);
+    if (eye.x > 1e30) hdr.r = 0.0;
+}
+"""
+COPY_FRAG = """#version 430
+uniform sampler2D hdr;
+uniform ivec2 origin;
+uniform int frame_height;
+out vec4 colour;
+void main() {
+    vec4 pixel = texelFetch(hdr, ivec2(int(gl_FragCoord.x), frame_height - 1 - int(gl_FragCoord.y)) - origin, 0);
+    if (pixel.a < 0.5) discard;
+    colour = vec4(pixel.rgb, 1.0);
+}
+"""
+
+
+class FloorRenderer(Renderer):
+    """The renderer's tiles, rectangles and passes with the cheapest work in each (module docstring)."""
+
+    def add(self, obj) -> None:
+        super().add(obj)
+        d = self.objects[-1]
+        if d.sphere is not None:  # the impostor's quad, filled
+            program = self.ctx.program(vertex_shader=_source("sphere.vert", []), fragment_shader=FLOOR_FRAG)
+            program["center"].value, program["radius"].value = tuple(d.sphere[0]), d.sphere[1]
+            quad = np.array([(-1, -1), (1, -1), (-1, 1), (-1, 1), (1, -1), (1, 1)], dtype="f4")
+            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(quad.tobytes()), "2f", "in_corner")])
+        else:
+            program = self.ctx.program(vertex_shader=FLOOR_VERT, fragment_shader=FLOOR_FRAG)
+            program["model"].write(obj.model.T.astype("f4").tobytes())
+            mesh = obj.lods[-1][0] if obj.lods else obj.mesh
+            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.positions.astype("f4").tobytes()), "3f", "in_position")],
+                                        self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes()))
+        d.program, d.vaos, d.errors, d.units, d.texel_world = program, [vao], np.zeros(1), [], {}
+        if not hasattr(self, "copy"):
+            self.copy = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=COPY_FRAG)
+            self.copy_vao = None
+
+    def background_pass(self, rgba: np.ndarray) -> None:
+        self.output.write(rgba)
+
+    def tonemap_pass(self, *args) -> None:
+        if self.tile is None:
+            return
+        self.tile.hdr.use(0)
+        self.copy["hdr"].value = 0
+        self.copy["origin"].value = self.rect[:2]
+        self.copy["frame_size"].value = (self.camera.width, self.camera.height)
+        self.copy["frame_height"].value = self.camera.height
+        corners = np.array([[(x, y), (x + w, y), (x, y + h), (x, y + h), (x + w, y), (x + w, y + h)]
+                            for x, y, w, h in self.rects], dtype="f4")
+        if self.copy_vao is None:  # (a buffer kept, as the renderer keeps its own)
+            self.copy_vbo = self.ctx.buffer(reserve=64 * 48)
+            self.copy_vao = self.ctx.vertex_array(self.copy, [(self.copy_vbo, "2f", "in_corner")])
+        self.copy_vbo.write(corners.tobytes())
+        self.output_fbo.use()
+        self.copy_vao.render(vertices=6 * len(self.rects))
+
+    def overlay_pass(self, image: np.ndarray) -> None:
+        if self.overlay_program is None:
+            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("overlay.frag", []))
+            texture = self.ctx.texture(image.shape[1::-1], 4, np.ascontiguousarray(image).tobytes(), dtype="f1")
+            self.overlay_program = (program, self.ctx.vertex_array(program, []), texture)
+        program, vao, texture = self.overlay_program
+        self.output_fbo.use()
+        self.ctx.enable(self.ctx.BLEND)
+        self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
+        texture.use(0)
+        program["image"].value = 0
+        margin = max(self.camera.height // 90, 2)
+        self.output_fbo.viewport = (margin, margin, *image.shape[1::-1])
+        vao.render(vertices=3)
+        self.ctx.disable(self.ctx.BLEND)
+        self.output_fbo.viewport = (0, 0, self.camera.width, self.camera.height)
 
 
 def main() -> None:
@@ -30,49 +126,65 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=60, help="frames spread over the path (default 60)")
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--height", type=int, default=720)
+    parser.add_argument("--log-average", action="store_true", help="tone-map with the log-average (default: [render] log_average)")
     args = parser.parse_args()
 
     scenario = Scenario()
+    r = scenario.render
+    log_average = args.log_average or r.log_average
     env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", 256)
-    objects = scene_objects(scenario.render)
+    objects = scene_objects(r)
     exponents = sorted({1.0} | {o.material.exponent for o in objects})
     maps = MapSet.of("fast", exponents, fast_maps(env, exponents))
     ctx = create_gl_context()
     camera = CameraIntrinsics.from_fov(args.width, args.height, scenario.device.camera.hfov_deg)
-    renderer = Renderer(camera, maps, ctx)
+    renderer, floor = Renderer(camera, maps, ctx), FloorRenderer(camera, maps, ctx)
     for obj in objects:
         renderer.add(obj)
+        floor.add(obj)
     path = ar_path(scenario)
     t = np.linspace(0.0, path.duration, args.frames)
     t = t[path._away(t) == 0.0]  # the tag in view
     cam_to_world = path.camera_orientation(t)
     positions = path.position(t)
     background = np.random.default_rng(0).integers(0, 256, (args.height, args.width, 3), dtype=np.uint8)
+    rgba = np.dstack([background, np.full(background.shape[:2], 255, np.uint8)])
+    overlay = overlay_image(["frame 0  16.0 ms", "maps: fast"], args.height)
     query = ctx.query(time=True)
     names = ("background (4)", "objects (5)", "tone mapping (6)", "overlay (7)")
-    cpu, gl = np.zeros((len(t) + 3, 4)), np.zeros((len(t) + 3, 4))
-    for n in range(len(t) + 3):
-        k = max(n - 3, 0)  # the first three frames compile and allocate
+    warm = 3  # the first frames compile and allocate
+    cpu, gl = np.zeros((2, len(t) + warm, 4)), np.zeros((2, len(t) + warm, 4))
+    for n in range(len(t) + warm):
+        k = max(n - warm, 0)
         rotation = cam_to_world[k].inv()
-        steps = (lambda: renderer.background_pass(background),
-                 lambda: renderer.render_objects(rotation, -rotation.apply(positions[k])),
-                 lambda: renderer.tonemap_pass(),
-                 lambda: renderer.overlay_pass([f"frame {k}  16.0 ms", "maps: fast"]))
-        for s, work in enumerate(steps):
-            ctx.finish()
-            start = time.perf_counter()
-            with query:
-                work()
-            ctx.finish()
-            cpu[n, s], gl[n, s] = 1000 * (time.perf_counter() - start), query.elapsed / 1e6
-    cpu, gl = cpu[3:], gl[3:]
+        translation = -rotation.apply(positions[k])
+        runs = ((lambda: renderer.background_pass(background),
+                 lambda: renderer.render_objects(rotation, translation),
+                 lambda: renderer.tonemap_pass(r.key, r.white, log_average),
+                 lambda: renderer.overlay_pass([f"frame {k}  16.0 ms", "maps: fast"])),
+                (lambda: floor.background_pass(rgba),
+                 lambda: floor.render_objects(rotation, translation),
+                 lambda: floor.tonemap_pass(),
+                 lambda: floor.overlay_pass(overlay)))
+        for which in (0, 1) if n % 2 == 0 else (1, 0):  # (neither always first)
+            for s, work in enumerate(runs[which]):
+                ctx.finish()
+                start = time.perf_counter()
+                with query:
+                    work()
+                ctx.finish()
+                cpu[which, n, s], gl[which, n, s] = 1000 * (time.perf_counter() - start), query.elapsed / 1e6
+    cpu, gl = cpu[:, warm:], gl[:, warm:]
     print(f"{args.width} x {args.height}, {len(renderer.objects)} objects, {len(t)} frames of the default AR path "
-          f"({np.linalg.norm(positions, axis=1).min():.2f}-{np.linalg.norm(positions, axis=1).max():.2f} m from the tag), ms:")
-    print(f"  {'step':20s} {'CPU median':>10s} {'p95':>7s} {'max':>7s}   {'GL median':>9s} {'p95':>7s}")
+          f"({np.linalg.norm(positions, axis=1).min():.2f}-{np.linalg.norm(positions, axis=1).max():.2f} m from the tag), "
+          f"log_average {log_average}, ms:")
+    print(f"  {'step':20s} {'CPU median':>10s} {'p95':>7s} {'max':>7s}   {'GL median':>9s} {'p95':>7s}   "
+          f"{'floor median':>12s} {'p95':>7s} {'max':>7s}   {'median/floor':>12s}")
     for s, name in enumerate(names + ("steps 4-7",)):
-        c, g = (cpu[:, s], gl[:, s]) if s < 4 else (cpu.sum(axis=1), gl.sum(axis=1))
+        c, g, f = (cpu[0, :, s], gl[0, :, s], cpu[1, :, s]) if s < 4 else (cpu[0].sum(axis=1), gl[0].sum(axis=1), cpu[1].sum(axis=1))
         print(f"  {name:20s} {np.median(c):10.2f} {np.percentile(c, 95):7.2f} {c.max():7.2f}   "
-              f"{np.median(g):9.2f} {np.percentile(g, 95):7.2f}")
+              f"{np.median(g):9.2f} {np.percentile(g, 95):7.2f}   "
+              f"{np.median(f):12.2f} {np.percentile(f, 95):7.2f} {f.max():7.2f}   {np.median(c) / np.median(f):12.2f}")
 
 
 if __name__ == "__main__":

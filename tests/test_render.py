@@ -92,9 +92,9 @@ def test_tone_mapping_equals_the_numpy_reference_within_one_step(gl, maps, key, 
     background = np.random.default_rng(0).integers(0, 256, (CAMERA.height, CAMERA.width, 3), dtype=np.uint8)
     out = r.tonemap(background, key, white, log_average)
     hdr, mask = r.read_hdr(), r.read_mask()
-    # The mip chain's top is the masked (log-)mean (the targets are padded to powers of two), up to half floats.
+    # The average chain's top is the masked pixels' (log-)mean of the half-float colour, summed in float32.
     average = r.mip_average(log_average)
-    assert average == pytest.approx(shading.average_luminance(hdr, mask, log_average), rel=5e-3)
+    assert average == pytest.approx(shading.average_luminance(hdr, mask, log_average), rel=1e-5)
     if log_average:  # the log-average lies below the mean (Jensen), for a scene with highlights well below
         assert average < 0.9 * shading.average_luminance(hdr, mask)
     reference = shading.tonemap(hdr, mask, key, white, average)
@@ -102,6 +102,37 @@ def test_tone_mapping_equals_the_numpy_reference_within_one_step(gl, maps, key, 
     expected = np.where(inside[..., None], np.clip(np.round(reference * 255), 0, 255), background)
     assert np.abs(out.astype(int) - expected.astype(int)).max() <= 1
     assert (out[~inside] == background[~inside]).all()  # the camera image passes where nothing is drawn
+
+
+@pytest.mark.parametrize("log_average", [False, True])
+def test_the_average_over_objects_far_apart_is_the_masked_mean_frame_after_frame(gl, maps, log_average):
+    """Objects apart on the screen (their rectangles' corners off the average's blocks, the space between
+    them never summed) and a second frame from elsewhere into the same tile: the tone mapper's average is
+    the NumPy reference's over the frame's masked pixels within float32 rounding, and the tile holds
+    nothing outside the frame's own rectangles (what the last frame wrote was cleared)."""
+    from arsim.render.renderer import AVERAGE_BLOCK
+
+    r = Renderer(CAMERA, maps, gl)
+    for x, material in ((-0.25, Material(KD, KS, 80.0)), (0.25, Material((0.9, 0.2, 0.1), KS, 1.0))):
+        model = np.eye(4)
+        model[:3, 3] = [x, 0.1, 0.0]
+        r.add(SceneObject(uv_sphere(0.1), material, model))  # meshes: two separate rectangles
+    background = np.zeros((CAMERA.height, CAMERA.width, 3), np.uint8)
+    tiles = []
+    for eye in ([0.0, 0.3, 0.75], [0.06, 0.27, 0.8]):
+        r.render_objects(*look_at(np.array(eye), [0.0, 0.1, 0.0]))
+        r.tonemap(background, 0.18, 2.0, log_average)
+        assert len(r.rects) == 2 and any(v % AVERAGE_BLOCK for rect in r.rects for v in rect)
+        average = r.mip_average(log_average)
+        assert average == pytest.approx(shading.average_luminance(r.read_hdr(), r.read_mask(), log_average), rel=1e-5)
+        tiles.append(r.tile)
+        w, h = r.tile.hdr.size
+        tile = np.frombuffer(r.tile.hdr.read(), np.float16).reshape(h, w, 4)
+        inside = np.zeros((h, w), bool)
+        for x, y, rw, rh in r.rects:
+            inside[y - r.rect[1]:y - r.rect[1] + rh, x - r.rect[0]:x - r.rect[0] + rw] = True
+        assert (tile[~inside] == 0).all() and (tile[inside][:, 3] == 1).sum() > 500
+    assert tiles[0] is tiles[1]  # the same tile, drawn elsewhere the second time
 
 
 def test_a_ray_cast_sphere_has_the_exact_outline_and_normals(gl, maps):
@@ -309,3 +340,36 @@ def test_an_object_that_moves_is_drawn_where_its_orbit_has_it(gl, maps, impostor
         np.testing.assert_array_equal(moving, still)
     # (the two times differ: the test sees the motion)
     assert not np.array_equal(frame(np.zeros(3), orbit, 0.0)[0], frame(np.zeros(3), orbit, 1.0)[0])
+
+
+def test_rectangles_side_by_side_merge_and_rectangles_apart_do_not():
+    from arsim.render.renderer import merge_rects
+
+    row = [(100 + 70 * k, 500 + k % 2, 75, 80) for k in range(10)]  # a row of spheres' rectangles, overlapping
+    apart = (400, 100, 300, 250)
+    merged = merge_rects(row + [apart])
+    assert merged == [(100, 500, 705, 81), apart]
+    assert merge_rects([(0, 0, 10, 10), (30, 0, 10, 10)]) == [(0, 0, 10, 10), (30, 0, 10, 10)]  # 40 x 10 over 200 covered
+    covered = np.zeros((800, 1000), bool)
+    for x, y, w, h in row + [apart]:
+        covered[y:y + h, x:x + w] = True
+    inside = np.zeros_like(covered)
+    for x, y, w, h in merged:
+        inside[y:y + h, x:x + w] = True
+    assert inside[covered].all() and inside.sum() <= 1.25 * covered.sum()
+
+
+def test_the_torus_levels_of_detail_depart_from_the_torus_by_what_they_state():
+    """Each coarser torus's stated departure bounds how far its triangles lie from the surface (at their
+    centres and edge midpoints) and is not loose (at most twice it); the steps are close, so that the
+    renderer's half-pixel limit picks a mesh little finer than it needs."""
+    from arsim.render.content import torus_distance, torus_lods
+
+    lods = torus_lods(0.05, 0.02, 96)
+    errors = np.array([e for _, e in lods])
+    assert (np.diff(errors) > 0).all() and (errors[1:] / errors[:-1]).max() < 1.6
+    for mesh, error in lods:
+        p = mesh.positions[mesh.indices].astype(np.float64)  # (T, 3, 3)
+        points = np.concatenate([p.mean(axis=1), ((p + np.roll(p, 1, axis=1)) / 2).reshape(-1, 3)])
+        departure = np.abs(torus_distance(points, 0.05, 0.02)).max()
+        assert 0.5 * error <= departure <= error * (1 + 1e-4)

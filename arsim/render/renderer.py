@@ -1,12 +1,15 @@
 """The renderer's GL passes (moderngl), thesis 5.1 steps 4-7: the camera frame as the background, the
-virtual objects into an HDR colour target and a mask, the masked tone mapping, and the overlay.
+virtual objects into an HDR colour target whose alpha is the mask, the masked tone mapping, and the
+overlay.
 
 The objects are drawn into a tile: render targets a power of two on each side, just large enough for
 the objects' rectangle on the screen (their bounding boxes, projected), with the frame's viewport shifted
-so that the rectangle's corner lands on the tile's. Clearing the tile, its mip chain and the tone
-mapping then cost what the objects cover, not what the frame does (on llvmpipe, a 1280 x 720 RGBA16F
-clear and mip chain take 5 ms; a fullscreen pass 2 ms), and the powers of two make every mip level
-halve exactly, so that the top of the chain is the mean of the tile.
+so that the rectangle's corner lands on the tile's. Clearing the tile, the tone mapper's average and the
+tone mapping then cost what the objects cover, not what the frame does (on llvmpipe, a 1280 x 720
+RGBA16F clear and mip chain take 5 ms; a fullscreen pass 2 ms): each runs on the objects' own
+rectangles (merge_rects). The average is summed in blocks into a target AVERAGE_BLOCK times smaller on
+each side, also a power of two, so that every level of its mip chain halves exactly and its top is the
+mean of the tile.
 
 Images come back with row 0 at the top (OpenCV's convention); GL's framebuffer rows are bottom-up.
 """
@@ -28,7 +31,6 @@ from arsim.core.resample import extend_beyond_rim
 from arsim.lighting.bases import parse_basis
 from arsim.lighting.mapset import MapSet
 from arsim.render.meshes import Mesh
-from arsim.render.shading import TONEMAP_LUMA
 
 
 def _shader(name: str) -> str:
@@ -168,28 +170,40 @@ class _Drawable:
     prt: tuple | None = None  # (the material, the coefficients' buffer (vertex) or texture array (texel))
 
 
+# The tone mapper's average is summed in blocks of this many pixels a side, over the objects' rectangles
+# only, into a target this many times smaller on each side than the tile, whose mip chain gives the mean:
+# on llvmpipe the RGBA16F mip chain of a whole tile took 3 ms a frame (median; 13 at worst), the tile
+# mostly the space between the objects; the blocks and their chain take 0.5-1 ms (8 measured a little
+# faster than 4: fewer fragments, a shorter chain).
+AVERAGE_BLOCK = 8
+
+
 @dataclass
 class _Tile:
-    """The render targets of one tile size: HDR colour (alpha: coverage), mask (its second channel:
-    log(delta + L_w) where it is set), depth, and with debug the shading vectors."""
+    """The render targets of one tile size: HDR colour (its alpha the mask: 1 where an object was drawn),
+    depth, and with debug the shading vectors; and the tone mapper's average target (a texel per
+    AVERAGE_BLOCK² pixels: the block's mean luminance or log, its coverage)."""
 
     hdr: object
-    mask: object
     fbo: object
-    clear_fbo: object  # the mask and the depth (and the debug targets): what clears fast
+    clear_fbo: object  # the depth (and the debug targets): what clears fast
     zeros: bytes  # an HDR tile of zeros
+    average: object
+    average_fbo: object
     debug: list = field(default_factory=list)
-    dirty: tuple[int, int] = (0, 0)  # the HDR colour's lower-left part written since it was zeroed
+    dirty: list = field(default_factory=list)  # the rectangles (x, y, w, h) written since the tile was zeroed
 
-    def clear(self, width: int, height: int) -> None:
-        """Clear for a frame whose rectangle is width x height. llvmpipe clears 64-bit pixels (RGBA16F)
-        through a slow path, 3 to 5 times what uploading zeros takes: the HDR colour gets zeros uploaded
-        over the part the last frame wrote, the 32-bit targets a clear."""
-        self.clear_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        w, h = self.dirty
-        if w and h:
-            self.hdr.write(memoryview(self.zeros)[:w * h * 8], viewport=(0, 0, w, h))
-        self.dirty = (width, height)
+    def clear(self, rects: list[tuple[int, int, int, int]]) -> None:
+        """Clear for a frame whose objects lie in rects (tile pixels): the rectangles the last frame wrote,
+        so that the whole tile is zero again (a tile's pixels are written only inside its frame's
+        rectangles). llvmpipe clears 64-bit pixels (RGBA16F) through a slow path, 3 to 5 times what
+        uploading zeros takes: the HDR colour gets zeros uploaded, the depth a clear; and over the
+        objects' own rectangles, not the space between them that their union holds."""
+        for x, y, w, h in self.dirty:
+            self.clear_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=(x, y, w, h))
+            self.hdr.write(memoryview(self.zeros)[:w * h * 8], viewport=(x, y, w, h))
+        width, height = self.hdr.size
+        self.dirty = [(x, y, min(w, width - x), min(h, height - y)) for x, y, w, h in rects if x < width and y < height]
 
 
 def texel_length(mesh: Mesh, uvs: np.ndarray, texture_size: int) -> float:
@@ -219,6 +233,35 @@ def overlay_image(lines: Sequence[str], frame_height: int) -> np.ndarray:
     return np.dstack([coverage, coverage, coverage, alpha])
 
 
+# Rectangles are merged where their bounding rectangle is at most this many times the area they cover:
+# each rectangle costs every frame a clear and an upload of zeros (0.05-0.1 ms on llvmpipe), and a row of
+# objects side by side is as cheap drawn as one.
+MERGE_SLACK = 1.25
+
+
+def merge_rects(rects: Sequence[tuple[int, int, int, int]], slack: float = MERGE_SLACK) -> list[tuple[int, int, int, int]]:
+    """Rectangles (x, y, w, h), two at a time replaced by their bounding rectangle where its area is at
+    most slack times the area the two cover (the first such pair in order, until none is left): what
+    covers every pixel the given ones do."""
+    out = [tuple(int(v) for v in r) for r in rects]
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(out)):
+            for j in range(i + 1, len(out)):
+                (ax, ay, aw, ah), (bx, by, bw, bh) = out[i], out[j]
+                x0, y0, x1, y1 = min(ax, bx), min(ay, by), max(ax + aw, bx + bw), max(ay + ah, by + bh)
+                overlap = max(min(ax + aw, bx + bw) - max(ax, bx), 0) * max(min(ay + ah, by + bh) - max(ay, by), 0)
+                if (x1 - x0) * (y1 - y0) <= slack * (aw * ah + bw * bh - overlap):
+                    out[i] = (x0, y0, x1 - x0, y1 - y0)
+                    del out[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return out
+
+
 def _power_of_two(n: int, least: int = 16) -> int:
     return max(1 << int(np.ceil(np.log2(max(n, 1)))), least)
 
@@ -243,7 +286,7 @@ class Renderer:
         self.tiles: dict[tuple[int, int], _Tile] = {}
         self.tile: _Tile | None = None  # the last render_objects' tile; None when nothing was in view
         self.rect: tuple[int, int, int, int] | None = None  # its rectangle in the frame: x, y (GL, from the bottom), w, h
-        self.rects: list[tuple[int, int, int, int]] = []  # the objects' own rectangles in it
+        self.rects: list[tuple[int, int, int, int]] = []  # the objects' own rectangles in it (merge_rects)
         # The output: the camera frame written in (step 4), the tone-mapped objects drawn over it (step 6).
         # Its rows run from the image's top, as the camera delivers them (the passes that draw into it
         # flip GL's bottom-up rows instead of a copy of each frame), and it is RGBA (llvmpipe writes and
@@ -252,6 +295,7 @@ class Renderer:
         self._rgba = np.empty((camera.height, camera.width, 4), np.uint8)
         self.output_fbo = self.ctx.framebuffer([self.output])
         self.tonemappers = {}
+        self._rect_arrays = {}  # per program (by id: each is kept in tonemappers), the rectangles' buffer and vertex array
         self._ggx_cache = {}  # GGX materials' prefiltered cube maps (per chain) and the split sum's table
         self._cube_writer = None
         self.overlay_program = None
@@ -582,12 +626,14 @@ class Renderer:
         size = (min(_power_of_two(width), _power_of_two(self.camera.width)),
                 min(_power_of_two(height), _power_of_two(self.camera.height)))
         if size not in self.tiles:
-            hdr, mask = self.ctx.texture(size, 4, dtype="f2"), self.ctx.texture(size, 2, dtype="f2")
+            hdr = self.ctx.texture(size, 4, dtype="f2")
             debug = [self.ctx.texture(size, 4, dtype="f4") for _ in range(2)] if self.debug else []
             depth = self.ctx.depth_renderbuffer(size)
-            fbo = self.ctx.framebuffer([hdr, mask, *debug], depth)
+            fbo = self.ctx.framebuffer([hdr, *debug], depth)
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)  # (a new texture's content is undefined)
-            self.tiles[size] = _Tile(hdr, mask, fbo, self.ctx.framebuffer([mask, *debug], depth), bytes(size[0] * size[1] * 8), debug)
+            average = self.ctx.texture((size[0] // AVERAGE_BLOCK, size[1] // AVERAGE_BLOCK), 2, dtype="f4")
+            self.tiles[size] = _Tile(hdr, fbo, self.ctx.framebuffer(debug, depth), bytes(size[0] * size[1] * 8),
+                                     average, self.ctx.framebuffer([average]), debug)
         return self.tiles[size]
 
     def no_objects(self) -> None:
@@ -602,7 +648,7 @@ class Renderer:
         view = gl_view_from_opencv_pose(rotation, translation)
         view_projection = self.projection @ view
         eye = -rotation.as_matrix().T @ np.asarray(translation, dtype=np.float64)
-        self.rects = self.screen_rects(view_projection)
+        self.rects = merge_rects(self.screen_rects(view_projection))
         if not self.rects:
             return self.no_objects()
         corners = np.array([(x, y, x + w, y + h) for x, y, w, h in self.rects])
@@ -612,7 +658,7 @@ class Renderer:
         x, y, w, h = self.rect
         self.tile = self._tile(w, h)
         self.tile.fbo.use()
-        self.tile.clear(w, h)
+        self.tile.clear([(rx - x, ry - y, rw, rh) for rx, ry, rw, rh in self.rects])
         self.tile.fbo.viewport = (-x, -y, self.camera.width, self.camera.height)  # the rectangle's corner at the tile's
         self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)  # closed meshes: their back faces are hidden
         depths = np.maximum((self.corners @ view_projection.T)[..., 3].min(axis=1), self.near)  # nearest points
@@ -636,14 +682,49 @@ class Renderer:
         self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
 
     def _tonemapper(self, log_average: bool):
+        """The average's program and the tone mapper's, for the mean or the log-average."""
         if log_average not in self.tonemappers:
             defines = ["LOG_AVERAGE"] if log_average else []
-            program = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=_source("tonemap.frag", defines))
-            self.tonemappers[log_average] = program
+            average = self.ctx.program(vertex_shader=_source("blocks.vert", []),
+                                       fragment_shader=_source("average.frag", defines + [f"BLOCK {AVERAGE_BLOCK}"]))
+            program = self.ctx.program(vertex_shader=_source("rects.vert", defines + ["AVERAGE"]),
+                                       fragment_shader=_source("tonemap.frag", defines))
+            self.tonemappers[log_average] = (average, program)
         return self.tonemappers[log_average]
 
     def top_level(self) -> int:
-        return int(np.log2(max(self.tile.hdr.width, self.tile.hdr.height)))
+        return int(np.log2(max(self.tile.average.width, self.tile.average.height)))
+
+    def _draw_rects(self, program, rects: np.ndarray) -> None:
+        """Two triangles per rectangle (x0, y0, x1, y1) with the program, into the framebuffer in use. The
+        corners go into a buffer kept per program (grown when a frame has more rectangles), not one made
+        and released per draw."""
+        corners = np.array([[(x0, y0), (x1, y0), (x0, y1), (x0, y1), (x1, y0), (x1, y1)] for x0, y0, x1, y1 in rects], dtype="f4")
+        vbo, vao = self._rect_arrays.get(id(program), (None, None))
+        if vbo is None or vbo.size < corners.nbytes:
+            if vbo is not None:
+                vao.release()
+                vbo.release()
+            vbo = self.ctx.buffer(reserve=max(corners.nbytes, 64 * 48))
+            vao = self.ctx.vertex_array(program, [(vbo, "2f", "in_corner")])
+            self._rect_arrays[id(program)] = (vbo, vao)
+        vbo.write(corners.tobytes())
+        vao.render(vertices=6 * len(rects))
+
+    def _average_pass(self, program) -> None:
+        """The masked pixels' average into the top of the tile's average chain: the blocks that hold the
+        objects' rectangles summed into the average target (zeros elsewhere), then its mip chain."""
+        tile, b = self.tile, AVERAGE_BLOCK
+        tile.average_fbo.use()
+        tile.average_fbo.clear(0.0, 0.0, 0.0, 0.0)
+        x0, y0 = self.rect[:2]
+        rects = np.array([(x - x0, y - y0, x - x0 + w, y - y0 + h) for x, y, w, h in self.rects])
+        blocks = np.hstack([rects[:, :2] // b, -(-rects[:, 2:] // b)])  # grown to whole blocks
+        tile.hdr.use(0)
+        program["hdr"].value = 0
+        program["target_size"].value = tile.average.size
+        self._draw_rects(program, blocks)
+        tile.average.build_mipmaps()
 
     def tonemap(self, background: np.ndarray, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> np.ndarray:
         """Steps 4 and 6: the camera frame (H, W, 3) uint8 with Reinhard's operator on the masked pixels
@@ -661,14 +742,11 @@ class Renderer:
         """Step 6: the tone-mapped objects over the output's background, without reading it back."""
         if self.tile is None:
             return
-        self.tile.hdr.build_mipmaps()  # its alpha is the mask's coverage
-        if log_average:
-            self.tile.mask.build_mipmaps()  # its second channel: log(delta + L_w) of the masked pixels
-        program = self._tonemapper(log_average)
-        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("mask", self.tile.mask)]):
-            if name in program:  # the mask's log channel: only the log-average reads it
-                tex.use(unit)
-                program[name].value = unit
+        average, program = self._tonemapper(log_average)
+        self._average_pass(average)
+        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("average", self.tile.average)]):
+            tex.use(unit)
+            program[name].value = unit
         program["key"].value, program["white"].value = key, white
         program["top_level"].value = self.top_level()
         program["origin"].value = self.rect[:2]
@@ -676,14 +754,8 @@ class Renderer:
         program["frame_height"].value = self.camera.height
         # Only the objects' own rectangles (two triangles each; where they overlap, a pixel is mapped twice
         # to the same value): a fraction of their union, which holds the space between them.
-        corners = np.array([[(x, y), (x + w, y), (x, y + h), (x, y + h), (x + w, y), (x + w, y + h)]
-                            for x, y, w, h in self.rects], dtype="f4")
-        vbo = self.ctx.buffer(corners.tobytes())
         self.output_fbo.use()
-        vao = self.ctx.vertex_array(program, [(vbo, "2f", "in_corner")])
-        vao.render()
-        vao.release()
-        vbo.release()
+        self._draw_rects(program, np.array([(x, y, x + w, y + h) for x, y, w, h in self.rects]))
 
     def overlay_pass(self, lines: Sequence[str], thumbnail=None) -> None:
         """Step 7: the user interface, lines of text (frame time, bake progress) in a translucent box at
@@ -758,17 +830,16 @@ class Renderer:
         return self._read_tile("hdr", 4, "f2")[..., :3]
 
     def read_mask(self) -> np.ndarray:
-        return self._read_tile("mask", 2, "f2")[..., 0]
+        """(H, W) 1 where an object was drawn, 0 elsewhere: the HDR colour's alpha."""
+        return self._read_tile("hdr", 4, "f2")[..., 3]
 
     def read_debug(self) -> tuple[np.ndarray, np.ndarray]:
         """(normal (H, W, 4): the shaded normal and the light-map value in w, incident (H, W, 4))."""
         return tuple(self._read(t, 4, "f4") for t in self.tile.debug)
 
     def mip_average(self, log_average: bool = False) -> float:
-        """The average luminance of the masked pixels as the tone mapper reads it from the mip tops (after
-        a tonemap pass with the same log_average)."""
-        top = self.top_level()
-        mean = self._read(self.tile.hdr, 4, "f2", top)[0, 0]
-        if log_average:
-            return float(np.exp(self._read(self.tile.mask, 2, "f2", top)[0, 0, 1] / max(mean[3], 1e-12)))
-        return float(mean[:3] @ TONEMAP_LUMA / max(mean[3], 1e-12))
+        """The average luminance of the masked pixels as the tone mapper reads it from the top of the
+        tile's average chain (after a tonemap pass with the same log_average)."""
+        value, coverage = self._read(self.tile.average, 2, "f4", self.top_level())[0, 0]
+        mean = value / max(coverage, 1e-12)
+        return float(np.exp(mean) if log_average else mean)

@@ -1,8 +1,7 @@
 // Thesis Alg. 5.1 (image-based lighting with an irradiance and a reflection map), 5.2 (an ambient-
 // occlusion light map multiplied into the diffuse part, where LIGHT_MAP is defined) and 5.4 (a
-// tangent-space normal map, where NORMAL_MAP is defined). Writes the HDR colour and the mask (its second
-// channel: log(delta + L_w), for the tone mapper's log-average option); with
-// DEBUG, also the vectors it shaded with, for the NumPy reference to shade the same pixels. With
+// tangent-space normal map, where NORMAL_MAP is defined). Writes the HDR colour, its alpha the mask (1
+// where an object is drawn: the tile is zero elsewhere); with DEBUG, also the vectors it shaded with, for the NumPy reference to shade the same pixels. With
 // SPHERE_IMPOSTOR the fragment ray-casts a sphere through its quad (sphere.vert): the hit's normal, and
 // the hit's depth.
 uniform sampler2D irradiance_map;   // M_1, angle map extended past its rim
@@ -53,13 +52,10 @@ in vec3 v_tangent;
 in vec2 v_uv;
 in vec2 v_uv2;
 
-const float LOG_DELTA = 1e-4;       // Reinhard's delta in the log-average (render/shading.py)
-
 layout(location = 0) out vec4 hdr;
-layout(location = 1) out vec4 mask;
 #ifdef DEBUG
-layout(location = 2) out vec4 debug_normal;
-layout(location = 3) out vec4 debug_incident;
+layout(location = 1) out vec4 debug_normal;
+layout(location = 2) out vec4 debug_incident;
 #endif
 
 // The map's value in direction d: bilinear between texel centres, in an angle-map texture whose row 0 is
@@ -166,7 +162,6 @@ void main() {
     vec3 specular = lookup(reflection_map, reflect(v, n));
     hdr = vec4(kd * diffuse + ks * specular, 1.0);
 #endif
-    mask = vec4(1.0, log(LOG_DELTA + dot(hdr.rgb, vec3(0.299, 0.587, 0.114))), 0.0, 0.0);
 #ifdef DEBUG
 #if defined(VOLUME)
 #ifdef SPHERE_IMPOSTOR
