@@ -47,18 +47,12 @@ def _atan2_upper(y, x):  # pragma: no cover (compiled)
 
 
 @numba.njit(inline="always")
-def _bilinear(flat, offset, stride, row, col):  # pragma: no cover (compiled)
-    """The bilinear RGB at (row, col) of a level whose (size + 2)² RGBA texels (a one-texel border
-    copied from the edge) start at flat[offset]: with the border, no clamping, and the result equals
-    scipy's map_coordinates (order 1, mode 'nearest') on the level itself for row, col in [-0.5, size - 0.5]."""
-    row += 1.0
-    col += 1.0
-    r0 = int(row)  # row, col >= 0.5 here: truncation is floor
-    c0 = int(col)
-    fr = row - r0
-    fc = col - c0
-    i00 = 4 * (offset + r0 * stride + c0)
-    i10 = i00 + 4 * stride
+def _bilinear_at(flat, at, stride, fr, fc):  # pragma: no cover (compiled)
+    """The bilinear RGB of texels at, at + 1, at + stride, at + stride + 1 (RGBA, flat index in texels)
+    with fractions fr (down a row) and fc (along it). The levels' copied border makes this clamp-to-edge,
+    scipy's map_coordinates (order 1, mode 'nearest') on the level itself."""
+    i00 = 4 * at
+    i10 = 4 * (at + stride)
     w00 = (1.0 - fr) * (1.0 - fc)
     w01 = (1.0 - fr) * fc
     w10 = fr * (1.0 - fc)
@@ -89,6 +83,14 @@ def mc_values(dirs, turns, cos_t, along_t, along_b, lod_base, flat, offsets, siz
         tt = np.empty(samples)
         ll = np.empty(samples)
         mant = np.empty(samples, dtype=np.int64)
+        at_lo = np.empty(samples, dtype=np.int64)
+        at_hi = np.empty(samples, dtype=np.int64)
+        stride_lo = np.empty(samples, dtype=np.int64)
+        stride_hi = np.empty(samples, dtype=np.int64)
+        fr_lo = np.empty(samples)
+        fc_lo = np.empty(samples)
+        fr_hi = np.empty(samples)
+        fc_hi = np.empty(samples)
         ll_bits = ll.view(np.int64)
         mant_float = mant.view(np.float64)
         dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
@@ -135,19 +137,33 @@ def mc_values(dirs, turns, cos_t, along_t, along_b, lod_base, flat, offsets, siz
             else:
                 for j in range(samples):
                     ll[j] = 0.0
-            acc_r = acc_g = acc_b = 0.0
-            for j in range(samples):  # the reads: independent, so their latencies overlap
+            for j in range(samples):  # where each sample's two levels are read, and with what weights
                 lod = ll[j]
                 lower = int(lod)
                 frac = lod - lower
+                upper = min(lower + 1, n_levels - 1)
+                # rows and columns in bordered levels (+1): >= 0.5, so truncation is floor
                 size = sizes[lower]
-                row = (1.0 - tt[j]) * size - 0.5
-                col = ss[j] * size - 0.5
-                r, g, bl = _bilinear(flat, offsets[lower], size + 2, row, col)
+                row = (1.0 - tt[j]) * size + 0.5
+                col = ss[j] * size + 0.5
+                r0, c0 = int(row), int(col)
+                at_lo[j] = offsets[lower] + r0 * (size + 2) + c0
+                stride_lo[j] = size + 2
+                fr_lo[j], fc_lo[j] = row - r0, col - c0
+                size = sizes[upper]
+                row = (1.0 - tt[j]) * size + 0.5
+                col = ss[j] * size + 0.5
+                r0, c0 = int(row), int(col)
+                at_hi[j] = offsets[upper] + r0 * (size + 2) + c0
+                stride_hi[j] = size + 2
+                fr_hi[j], fc_hi[j] = row - r0, col - c0
+                ll[j] = frac
+            acc_r = acc_g = acc_b = 0.0
+            for j in range(samples):  # the reads: independent, so their latencies overlap
+                r, g, bl = _bilinear_at(flat, at_lo[j], stride_lo[j], fr_lo[j], fc_lo[j])
+                frac = ll[j]
                 if frac > 0:
-                    upper = min(lower + 1, n_levels - 1)
-                    size = sizes[upper]
-                    r2, g2, b2 = _bilinear(flat, offsets[upper], size + 2, (1.0 - tt[j]) * size - 0.5, ss[j] * size - 0.5)
+                    r2, g2, b2 = _bilinear_at(flat, at_hi[j], stride_hi[j], fr_hi[j], fc_hi[j])
                     r += frac * (r2 - r)
                     g += frac * (g2 - g)
                     bl += frac * (b2 - bl)
