@@ -96,9 +96,10 @@ METHODS = {
                ("sh_order", "sh_faithful", "sh_window"), in_loop=True),
         Method("sht", "exact texel sums and per-exponent syntheses through ducc0's fast SH transforms (fastest)",
                lambda env, ex, p: sht_prepare(env, ex), lambda env, c, s, p: sht_map(env, c, s)),
+        # mc bakes every exponent in one pass over the texels (its frames and chain shared): all shared time.
         Method("mc", "Monte Carlo importance sampling with MIP-filtered samples (Colbert and Krivanek)",
-               lambda env, ex, p: None, lambda env, _, s, p: mc_maps(env, [s], p.samples, p.seed)[0],
-               ("samples", "seed")),
+               lambda env, ex, p: dict(zip(map(float, ex), mc_maps(env, ex, p.samples, p.seed))),
+               lambda env, maps, s, p: maps[s], ("samples", "seed")),
     )
 }
 
