@@ -53,9 +53,10 @@ def _bilinear_at(flat, at, stride, fr, fc):  # pragma: no cover (compiled)
     scipy's map_coordinates (order 1, mode 'nearest') on the level itself."""
     i00 = 4 * at
     i10 = 4 * (at + stride)
-    w00 = (1.0 - fr) * (1.0 - fc)
-    w01 = (1.0 - fr) * fc
-    w10 = fr * (1.0 - fc)
+    one = np.float32(1.0)
+    w00 = (one - fr) * (one - fc)
+    w01 = (one - fr) * fc
+    w10 = fr * (one - fc)
     w11 = fr * fc
     r = w00 * flat[i00] + w01 * flat[i00 + 4] + w10 * flat[i10] + w11 * flat[i10 + 4]
     g = w00 * flat[i00 + 1] + w01 * flat[i00 + 5] + w10 * flat[i10 + 1] + w11 * flat[i10 + 5]
@@ -87,10 +88,10 @@ def mc_values(dirs, turns, cos_t, along_t, along_b, lod_base, flat, offsets, siz
         at_hi = np.empty(samples, dtype=np.int64)
         stride_lo = np.empty(samples, dtype=np.int64)
         stride_hi = np.empty(samples, dtype=np.int64)
-        fr_lo = np.empty(samples)
-        fc_lo = np.empty(samples)
-        fr_hi = np.empty(samples)
-        fc_hi = np.empty(samples)
+        fr_lo = np.empty(samples, dtype=np.float32)
+        fc_lo = np.empty(samples, dtype=np.float32)
+        fr_hi = np.empty(samples, dtype=np.float32)
+        fc_hi = np.empty(samples, dtype=np.float32)
         ll_bits = ll.view(np.int64)
         mant_float = mant.view(np.float64)
         dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
