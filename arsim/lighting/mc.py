@@ -4,8 +4,9 @@ the bridge between `mipmap` and `accurate` that thesis section 6.2.3 proposes.
 For an output direction d, K directions w_k are drawn with density p(w) = (s+1)/(2 pi) cos^s(theta)
 around d, the normalised Phong lobe itself, so the lobe average is simply the mean of the radiance
 seen in those directions. As in CK07 the K points are one Hammersley set, the same for every texel;
-each texel turns it about d by its own hashed angle (texel_turns), so neighbours' errors are unrelated. Each sample is read from the MIP chain at the level whose texels cover the
-solid angle the sample stands for, lod = max(0.5 log2(Omega_s / Omega_p) + LOD_BIAS, 0) with
+each texel turns it about d by its own hashed angle (texel_turns), so neighbours' errors are unrelated.
+Each sample is read from the MIP chain at the level whose texels cover the solid angle the sample
+stands for, lod = max(0.5 log2(Omega_s / Omega_p) + LOD_BIAS, 0) with
 Omega_s = 1 / (K p) and Omega_p the level-0 texel's solid angle there; that turns the noise of few
 samples into blur. The chain is built from the probe extended past the rim (core.resample), so that
 coarse levels near -z do not average in the black outside the disk. Deterministic for a given seed.
