@@ -564,13 +564,18 @@ def _orders(text: str) -> list[int]:
 
 def _probe(path: Path, size: int | None) -> np.ndarray:
     """The environment as an angle map of the given size; an angle map of that size is used as it is."""
+    return _probe_and_source(path, size)[0]
+
+
+def _probe_and_source(path: Path, size: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """_probe's angle map, and the image as read (which `sht` may sum at its own resolution)."""
     image, _ = replace_nonfinite(read_hdr(path), "refuse", str(path))
     layout = detect_layout(image, str(path))
     if layout == "anglemap" and size in (None, image.shape[0]):
         if not is_map_size(image.shape[0]):
             raise ArsimError(f"{path}: angle map size {image.shape[0]} is not a power of two from 8 up; pass --size 256 (or 512, ...)")
-        return image
-    return to_layout(image, "anglemap", size or 512)
+        return image, image
+    return to_layout(image, "anglemap", size or 512), image
 
 
 def _parameters(args: argparse.Namespace) -> MapParameters:
@@ -614,13 +619,14 @@ def _output(args: argparse.Namespace, *inputs: Path | None):
 def cmd_bake(args: argparse.Namespace) -> int:
     params = _parameters(args)
     params.check()  # before any work or output
-    env = _probe(args.env, args.size)
+    env, source = _probe_and_source(args.env, args.size)
     with _output(args, args.env) as work:
         with progress_bar(f"baking {len(args.spec)} maps ({args.method})", len(args.spec)) as update:
-            result = bake(env, args.spec, args.method, params, progress=lambda k: update(completed=k))
+            result = bake(env, args.spec, args.method, params, progress=lambda k: update(completed=k), source=source)
         write_bake(work, args.spec, args.method, params, result, str(args.env))
     out = args.output
-    print(f"wrote {len(args.spec)} maps ({args.method}, {env.shape[0]}² angle maps) to {out} in {result.seconds_total:.2f} s")
+    print(f"wrote {len(args.spec)} maps ({args.method}, {env.shape[0]}² angle maps, summed over the {result.summed_over}) "
+          f"to {out} in {result.seconds_total:.2f} s")
     return 0
 
 

@@ -1,6 +1,11 @@
 """`sht` and `sh` against a plain ducc0 script and against brute force (prints figures; not a test).
 
     python benchmarks/bench_sht.py [--assets city,interior,sunrise] [--texels 300] [--fine 2048] [--quick]
+    python benchmarks/bench_sht.py --speed [--assets city]
+
+--speed: per asset, `mc` at 64 samples against `sh` at order 64 (nine maps each, best of 3, in the same
+run: both times and their ratio) with mc's error against brute force, then `sh` at orders 3 to 1024, each
+time and its ratio to order 64's (a speed cliff shows as a ratio far from its neighbours').
 
 Per asset (512² angle map of the bundled equirect, nine exponents):
 - times, best of 3, with their ratios measured in the same run: `sht` (a bake: shared work + nine maps),
@@ -112,6 +117,48 @@ def timed_best(repeat, fn):
     return best, result
 
 
+def wall_and_cpu(repeat, fn):
+    """Best wall time, best CPU time (all threads: steadier than wall time on a shared machine), result."""
+    walls, cpus, result = [], [], None
+    for _ in range(repeat):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        result = fn()
+        walls.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - start_cpu)
+    return min(walls), min(cpus), result
+
+
+SWEEP_ORDERS = [3, 5, 10, 16, 17, 32, 64, 128, 256, 512, 1024]
+
+
+def speed(names, texels: int) -> None:
+    """mc at 64 samples against sh at order 64, and sh's time over orders, at 512² (best of 3 each)."""
+    for name in names:
+        env = to_layout(read_hdr(assets_dir() / "envmaps" / f"{name}.exr"), "anglemap", 512)
+        bake(env, EXPONENTS, "sh", MapParameters(sh_order=64))  # warm: compiled kernels, per-size caches
+        bake(env[::8, ::8].copy(), EXPONENTS, "mc", MapParameters(samples=64))
+        sh_s, sh_cpu, _ = wall_and_cpu(3, lambda: bake(env, EXPONENTS, "sh", MapParameters(sh_order=64)))
+        mc_s, mc_cpu, mc_bake = wall_and_cpu(3, lambda: bake(env, EXPONENTS, "mc", MapParameters(samples=64)))
+        print(f"\n{name}: nine 512² maps: mc (64 samples) {mc_s:.3f} s, sh (order 64) {sh_s:.3f} s; "
+              f"mc/sh64 = {mc_s / sh_s:.2f}x (CPU time of all threads: mc {mc_cpu:.2f} s, sh {sh_cpu:.2f} s, "
+              f"{mc_cpu / sh_cpu:.2f}x)")
+        picked = reference_texels(env, texels)
+        reference = lobe_average_at(env, EXPONENTS, anglemap_directions(512).reshape(-1, 3)[picked])
+        e = errors(reference, mc_bake.maps, picked)
+        print(f"  mc vs brute force at {len(picked)} texels, mean/max %: {row(e)}; mean over exponents "
+              f"{np.mean([x.mean_percent for x in e]):.3f}, worst max {max(x.max_percent for x in e):.2f}")
+        if name != names[0]:
+            continue
+        times = {}
+        for order in SWEEP_ORDERS:
+            params = MapParameters(sh_order=order)
+            bake(env, EXPONENTS, "sh", params)  # warm: the order's own tables
+            times[order] = best_of(3, lambda: bake(env, EXPONENTS, "sh", params))
+        print("  sh by order (nine maps), seconds and ratio to order 64: " + ", ".join(
+            f"{o}: {t:.3f} ({t / times[64]:.2f}x)" for o, t in times.items()))
+        print(f"  worst ratio {max(times.values()) / times[64]:.2f}x, best {min(times.values()) / times[64]:.2f}x")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--assets", default="city,interior,sunrise")
@@ -121,7 +168,11 @@ def main() -> None:
                         help="random texels for the fine reference (plus the bright patch): it costs (fine)² per texel")
     parser.add_argument("--quick", action="store_true", help="skip the fine reference and the window sweep")
     parser.add_argument("--skip-windows", action="store_true", help="skip the window sweep and mc")
+    parser.add_argument("--speed", action="store_true", help="only mc against sh at order 64, and sh's order sweep")
     args = parser.parse_args()
+    if args.speed:
+        speed(args.assets.split(","), args.texels)
+        return
     header = "  ".join(f"{f's={s}':>12}" for s in EXPONENTS)
     worst = {"sht": [0.0, 0.0], "sht fine": [0.0, 0.0], "sht equirect fine": [0.0, 0.0]}
     for name in args.assets.split(","):

@@ -32,6 +32,29 @@ def test_bake_writes_the_maps_and_bake_json(tmp_path, probe32):
     assert irradiance.shape == (32, 32, 3) and np.isfinite(irradiance).all() and irradiance.max() > 0
 
 
+def test_bake_sht_sums_a_larger_equirect_at_its_own_resolution(tmp_path):
+    from arsim.core.resample import to_layout
+    from arsim.lighting.methods import bake
+    from arsim.lighting.sht import sht_maps_from_source
+
+    equirect = read_hdr(ENVMAPS[1])[::8, ::8].astype(np.float32)  # 64 x 128: more texels than a 32² map
+    equirect[20, 70] += 500.0  # a small bright source, which resampling to 32² would thin out
+    write_exr(tmp_path / "probe.exr", equirect)
+    r = arsim("bake", tmp_path / "probe.exr", "-o", tmp_path / "maps", "--method", "sht", "--size", "32", "--spec", "1,80")
+    assert r.returncode == 0, r.stderr
+    record = json.loads((tmp_path / "maps" / "bake.json").read_text())
+    assert record["summed_over"] == "equirect 128x64 at its own resolution"
+    got = read_hdr(tmp_path / "maps" / "reflection_s80.exr")
+    source = read_hdr(tmp_path / "probe.exr")
+    np.testing.assert_allclose(got, sht_maps_from_source(source, 32, [80])[0], rtol=1e-6, atol=1e-6 * got.max())
+    resampled = bake(to_layout(source, "anglemap", 32), [80], "sht").maps[0]
+    assert np.abs(got - resampled).max() > 1e-3 * got.max()  # not the resampled map's sums
+    # a map as large as the equirect's texel count or larger: the resampled angle map, as before
+    r = arsim("bake", tmp_path / "probe.exr", "-o", tmp_path / "big", "--method", "sht", "--size", "128", "--spec", "1")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "big" / "bake.json").read_text())["summed_over"] == "angle map"
+
+
 def test_bake_resamples_an_equirect_to_the_requested_size(tmp_path):
     r = arsim("bake", ENVMAPS[1], "-o", tmp_path, "--method", "mipmap", "--size", "64", "--spec", "1")
     assert r.returncode == 0, r.stderr

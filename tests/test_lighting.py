@@ -177,6 +177,21 @@ def test_mc_is_deterministic_per_seed(courtyard32):
     assert not np.array_equal(mc_maps(courtyard32, [10], 8, seed=4)[0], a[0])
 
 
+def test_mc_pattern_is_hammersley_turned_per_texel_by_a_hash():
+    from arsim.lighting.mc import hammersley, texel_turns
+
+    u1, u2 = hammersley(4)
+    assert u1.tolist() == [0.125, 0.375, 0.625, 0.875] and u2.tolist() == [0.0, 0.5, 0.25, 0.75]
+    texels = np.arange(20000)
+    turns = texel_turns(0, 10.0, texels)
+    assert np.all((turns >= 0) & (turns < 2 * np.pi))
+    # uniform on [0, 2 pi): mean pi, variance pi^2 / 3, within a few standard errors of 20000 draws
+    assert abs(turns.mean() - np.pi) < 0.05 and abs(turns.var() - np.pi**2 / 3) < 0.1
+    assert np.array_equal(texel_turns(0, 10.0, texels[5000:6000]), turns[5000:6000])  # any texel alone
+    for other in (texel_turns(1, 10.0, texels), texel_turns(0, 20.0, texels)):
+        assert np.corrcoef(turns, other)[0, 1] < 0.05  # another seed or exponent: unrelated turns
+
+
 def test_mip_chain_is_a_2x2_box_pyramid_and_levels_follow_the_equations():
     img = np.random.default_rng(0).random((8, 8, 3))
     chain = mip_chain(img)

@@ -102,6 +102,24 @@ def test_sh_beyond_the_grid_orders_is_evaluated_at_the_texels():
                                atol=1e-6 * np.abs(direct).max())
 
 
+def test_sh_narrow_lobes_at_high_grid_orders_are_evaluated_at_the_texels():
+    """Above GRID_SPARED_FROM a lobe of few bands skips the order's grid: exact at the texels, and the
+    bands beyond carrying_bands (zonal factor under 1e-12) change nothing."""
+    from arsim.lighting.sh import BAND_NEGLIGIBLE, GRID_SPARED_FROM, carrying_bands
+
+    n, order = 16, GRID_SPARED_FROM + 8
+    env = np.random.default_rng(2).random((n, n, 3))
+    env[5, 9] = 300.0
+    inside = anglemap_disk_mask(n)
+    coeffs = sh_coefficients(env, order)
+    kappas = np.stack([phong_zonal_coefficients(s, order) for s in (40, 1280)])
+    assert carrying_bands(kappas[0]) < order and abs(kappas[0][carrying_bands(kappas[0])]) < BAND_NEGLIGIBLE
+    direct = sh_evaluate(coeffs, kappas, anglemap_directions(n)[inside])  # every band
+    maps = sh_maps(env, [40, 1280], order, coeffs=coeffs)
+    for k in range(2):
+        np.testing.assert_allclose(maps[k][inside], direct[k], rtol=1e-6, atol=1e-6 * np.abs(direct[k]).max())
+
+
 def test_sh_order_range_and_windows_are_checked():
     MapParameters(sh_order=MAX_ORDER).check()
     assert MAX_ORDER == 1024

@@ -37,6 +37,7 @@ def write_bake(out_dir: Path, exponents: Sequence[float], method: str, params: M
         "environment": source,
         "size": int(result.maps.shape[1]),
         "computed_on": result.computed_on,
+        "summed_over": result.summed_over,
         "maps": files,
         "seconds_shared": round(result.seconds_shared, 4),
         "seconds_total": round(result.seconds_total, 4),

@@ -21,7 +21,7 @@ from arsim.lighting.fast import fast_coefficients, fast_maps
 from arsim.lighting.mc import check_samples, mc_maps
 from arsim.lighting.mipmap import mipmap_maps
 from arsim.lighting.sh import GRID_MAX_ORDER, MAX_ORDER, WINDOWS, sh_coefficients, sh_maps
-from arsim.lighting.sht import sht_map, sht_prepare
+from arsim.lighting.sht import sht_map, sht_maps_from_source, sht_prepare
 
 DEFAULT_EXPONENTS = (1, 2, 10, 20, 40, 80, 160, 240, 320, 640, 1280)
 SH_ORDER = 35  # sh: bands 0..SH_ORDER-1, the thesis's order in its figures
@@ -96,9 +96,10 @@ METHODS = {
                ("sh_order", "sh_faithful", "sh_window"), in_loop=True),
         Method("sht", "exact texel sums and per-exponent syntheses through ducc0's fast SH transforms (fastest)",
                lambda env, ex, p: sht_prepare(env, ex), lambda env, c, s, p: sht_map(env, c, s)),
+        # mc bakes every exponent in one pass over the texels (its frames and chain shared): all shared time.
         Method("mc", "Monte Carlo importance sampling with MIP-filtered samples (Colbert and Krivanek)",
-               lambda env, ex, p: None, lambda env, _, s, p: mc_maps(env, [s], p.samples, p.seed)[0],
-               ("samples", "seed")),
+               lambda env, ex, p: dict(zip(map(float, ex), mc_maps(env, ex, p.samples, p.seed))),
+               lambda env, maps, s, p: maps[s], ("samples", "seed")),
     )
 }
 
@@ -120,6 +121,7 @@ class BakeResult:
     seconds_shared: float  # work all maps share (SH coefficients)
     seconds_per_map: tuple[float, ...]  # one per exponent
     computed_on: str = "numpy"  # or "gl: <renderer>"
+    summed_over: str = "angle map"  # the texels the lobe averages ran over (sums_source says when not the map's)
 
     @property
     def seconds_total(self) -> float:
@@ -130,14 +132,33 @@ GL_METHODS = tuple(name for name, m in METHODS.items() if m.gl)
 LOOP_METHODS = tuple(name for name, m in METHODS.items() if m.in_loop)  # what the frame loop can bake
 
 
+def sums_source(name: str, env: np.ndarray, source: np.ndarray | None) -> bool:
+    """Whether `sht` sums the probe's own texels instead of env's: an equirect source with more texels than
+    the N x N map, which resampling to the map would thin out (a small bright source loses or gains energy)."""
+    return (name == "sht" and source is not None and source.ndim == 3 and source.shape[1] == 2 * source.shape[0]
+            and source.shape[0] * source.shape[1] > env.shape[0] * env.shape[1])
+
+
 def bake(env: np.ndarray, exponents: Sequence[float], name: str, params: MapParameters | None = None,
-         progress: Callable[[int], None] | None = None, gl=None) -> BakeResult:
+         progress: Callable[[int], None] | None = None, gl=None, source: np.ndarray | None = None) -> BakeResult:
     """All maps of one method, timed; progress(k) is called after map k is done. With a moderngl context
-    `gl`, the GL_METHODS bake on the GL path (float32), all maps in one pass: its time is all shared."""
+    `gl`, the GL_METHODS bake on the GL path (float32), all maps in one pass: its time is all shared.
+    source: the probe as read, before it was resampled to env; `sht` sums it at its own resolution where
+    sums_source says so (all its time shared)."""
     params = params or MapParameters()
     params.check()
     check_inputs(env, exponents)
     m = method(name)
+    if sums_source(name, env, source):
+        start = time.perf_counter()
+        maps = sht_maps_from_source(source, env.shape[0], exponents)
+        if progress is not None:
+            progress(len(exponents))
+        if not np.isfinite(maps).all():
+            raise ArsimError(f"method {name} produced non-finite values; please report this with the input")
+        h, w = source.shape[:2]
+        return BakeResult(maps, time.perf_counter() - start, (0.0,) * len(exponents),
+                          summed_over=f"equirect {w}x{h} at its own resolution")
     if gl is not None and name in GL_METHODS:
         from arsim.lighting.gl_bake import gl_accurate_maps
 

@@ -12,8 +12,10 @@ per ring (NumPy here; compiled in sh_kernel.project_rings).
 
 Maps: M_s = sum_l kappa_l(s) w_l sum_m c_lm Y_lm (eq. 2.31, 2.33; w_l a window, 1 for plain truncation)
 is evaluated exactly at the texels up to DIRECT_MAX_ORDER and beyond GRID_MAX_ORDER (ducc0's
-non-uniform synthesis), and between them synthesised by ducc0 on a fine (theta, phi) grid and sampled
-bilinearly at the texel directions, as it always was.
+non-uniform synthesis; up to RINGS_MAX_ORDER per ring of equal polar angle instead), and between them synthesised by ducc0 on a fine (theta, phi) grid and sampled
+bilinearly at the texel directions, as it always was -- except, above GRID_SPARED_FROM, lobes that carry
+few bands (evaluated at the texels). Every synthesis stops at the last band whose zonal factor is above
+BAND_NEGLIGIBLE (carrying_bands): what the narrow lobes leave out at high orders.
 
 Y_lm evaluation: `stable` uses orthonormalised recurrences (no factorials), exact to any order used
 here. `faithful` evaluates Alg. 2.5/2.6 as printed: unnormalised P_l^m by Green's recurrence and
@@ -34,7 +36,7 @@ import scipy.fft
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.core.errors import ArsimError
 from arsim.lighting.phong import phong_zonal_coefficients
-from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, project_rings
+from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, project_rings, sum_azimuths
 from arsim.lighting.sht import (alm_bands, alm_from_real, disk_locations, sh_angles, synthesise_at, synthesise_cc_grid,
                                 texel_sums)
 
@@ -44,6 +46,15 @@ MAX_ORDER = 1024
 # per band would not fit in memory).
 DIRECT_MAX_ORDER = 16
 GRID_MAX_ORDER = 512
+# Up to this order the direct evaluation runs per ring of equal polar angle (_evaluate_disk_rings) rather
+# than through ducc0, whose fixed cost per call dominates there (at 512², nine maps: 0.08 s against 0.33 s
+# at order 3, 0.18 s against 0.33 s at order 8, 0.36 s against 0.39 s at order 16).
+RINGS_MAX_ORDER = DIRECT_MAX_ORDER
+# Above this order, a map whose lobe carries at most DIRECT_BANDS bands (carrying_bands) is evaluated at
+# the texels rather than on the order's grid: at 512², one such synthesis takes 0.05-0.1 s, the grid of
+# order 512 0.25 s per map (and the grid's bilinear error goes with it).
+GRID_SPARED_FROM = 128
+DIRECT_BANDS = 320
 
 # sh's windows against ringing (README: Irradiance and reflection maps), factors w_l for l < order.
 WINDOWS = ("none", "hann", "lanczos", "sloan")
@@ -260,11 +271,11 @@ def sh_synthesis_grid(coeffs: np.ndarray, kappas: np.ndarray, n_theta: int, n_ph
     n_maps, order = kappas.shape
     channels = coeffs.shape[1]
     if compiled and not faithful:  # ducc0's synthesis on its Clenshaw-Curtis grid: the same grid
-        alm = alm_from_real(coeffs[: order * order], order)
-        l = alm_bands(order - 1)
         out = np.empty((n_maps, channels, n_theta, n_phi))
         for k, planes in zip(kappas, out):
-            synthesise_cc_grid(alm * k[l], order - 1, n_theta, n_phi, out=planes)
+            bands = carrying_bands(k)  # the same grid, only the bands the lobe carries synthesised
+            synthesise_cc_grid(alm_from_real(coeffs[: bands * bands], bands) * k[alm_bands(bands - 1)], bands - 1,
+                               n_theta, n_phi, out=planes)
         return out
     theta = np.linspace(0.0, np.pi, n_theta)
     # Per m, the weighted coefficients as the spectrum of phi:
@@ -351,13 +362,72 @@ def probe_with_weights(env: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(env, dtype=np.float64)[..., :3], np.ones(env.shape[:2] + (1,))], axis=-1)
 
 
+# Bands whose zonal factor is below this (relative to band 0's) are left out of a map's synthesis. A band's
+# term is at most kappa_l (2l + 1) times band 0's (a single bright texel: every band alike), so at order 1024
+# what is left out stays below 3e-9 of the map: under float32's resolution, and under the transforms' 1e-12
+# relative accuracy at the bands that matter. It spares high orders the bands narrow lobes do not carry
+# (kappa_l ~ exp(-l^2 / 2s): about 270 bands at s = 1280, 24 at s = 10), which made order 1024 cost 20
+# times order 64.
+BAND_NEGLIGIBLE = 1e-12
+
+
+def carrying_bands(kappa: np.ndarray) -> int:
+    """1 + the last band whose zonal factor kappa (order,) is at least BAND_NEGLIGIBLE of kappa_0's."""
+    above = np.flatnonzero(np.abs(kappa) >= BAND_NEGLIGIBLE * abs(kappa[0]))
+    return int(above[-1]) + 1 if above.size else 1
+
+
+@functools.lru_cache(maxsize=4)
+def _disk_rings(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct polar angles of the disk texels (about N²/16) and, for the texels sorted by ring
+    (by_ring: their row-major indices), the ring of each and the cosine and sine of its azimuth."""
+    loc = disk_locations(n)
+    theta, ring = np.unique(loc[:, 0], return_inverse=True)
+    by_ring = np.argsort(ring.ravel(), kind="stable")
+    phi = loc[by_ring, 1]
+    return theta, ring.ravel()[by_ring].astype(np.int64), np.cos(phi), np.sin(phi), by_ring
+
+
+@functools.lru_cache(maxsize=2)
+def _ring_legendre(n: int, order: int) -> list[np.ndarray]:
+    """Per m, the orthonormal P_lm (rings, order - m) at the rings' polar angles (kept: bakes map by map
+    reuse it; 16 MB at order 16, 512²)."""
+    out = [np.ascontiguousarray(p.T) for _, p in _Legendre(_disk_rings(n)[0], order, False)]
+    for p in out:
+        p.setflags(write=False)
+    return out
+
+
+def _evaluate_disk_rings(coeffs: np.ndarray, kappas: np.ndarray, n: int) -> np.ndarray:
+    """_evaluate_disk for low orders, exactly (up to rounding) and without ducc0's per-call cost (about
+    0.015 s a channel at 512², more than order 64's whole grid): the Legendre sums per ring of equal
+    polar angle, then per texel the azimuthal series (sh_kernel.sum_azimuths)."""
+    n_maps, order = kappas.shape
+    theta, ring, cos_phi, sin_phi, by_ring = _disk_rings(n)
+    channels = coeffs.shape[1]
+    legendre = _ring_legendre(n, order)
+    out = np.empty((n_maps, ring.size, channels))
+    radial = np.zeros((theta.size, order, 2, channels))
+    for e in range(n_maps):
+        for m, p in enumerate(legendre):
+            ls = np.arange(m, order)
+            scale = np.sqrt(2.0) if m > 0 else 1.0
+            radial[:, m, 0] = p @ (scale * kappas[e, m:, None] * coeffs[ls * (ls + 1) + m])
+            if m > 0:
+                radial[:, m, 1] = p @ (scale * kappas[e, m:, None] * coeffs[ls * (ls + 1) - m])
+        sum_azimuths(radial, ring, cos_phi, sin_phi, by_ring, out[e])
+    return out
+
+
 def _evaluate_disk(coeffs: np.ndarray, kappas: np.ndarray, n: int) -> np.ndarray:
     """sum_lm kappa_l c_lm Y_lm at every disk texel, (E, K, C), by ducc0's non-uniform synthesis (exact
-    to 1e-12 relative, as sh_evaluate is exactly)."""
-    n_maps, order = kappas.shape
-    alm = alm_from_real(coeffs[: order * order], order)
-    l = alm_bands(order - 1)
-    return np.stack([synthesise_at(alm * k[l], order - 1, disk_locations(n)) for k in kappas])
+    to 1e-12 relative, as sh_evaluate is exactly), each map over the bands its lobe carries."""
+    out = []
+    for k in kappas:
+        bands = carrying_bands(k)
+        alm = alm_from_real(coeffs[: bands * bands], bands)
+        out.append(synthesise_at(alm * k[alm_bands(bands - 1)], bands - 1, disk_locations(n)))
+    return np.stack(out)
 
 
 def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[int], faithful: bool = False,
@@ -375,11 +445,25 @@ def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[i
         coeffs = sh_coefficients(source, max(orders), faithful)
     inside = anglemap_disk_mask(n)
     maps = np.zeros((len(exponents), n, n, 3), dtype=np.float32)
+    groups = []
     for o in sorted(set(orders)):
         which = [k for k, ok in enumerate(orders) if ok == o]
         kappas = np.stack([phong_zonal_coefficients(exponents[k], o) for k in which]) * sh_window(window, o)
-        if faithful and o <= DIRECT_MAX_ORDER:
+        if not faithful and DIRECT_MAX_ORDER < o <= GRID_MAX_ORDER and o > GRID_SPARED_FROM:
+            # A narrow lobe's few bands, evaluated at the texels (exact), cost less than the order's grid.
+            spared = np.array([carrying_bands(k) <= DIRECT_BANDS for k in kappas])
+            groups.append((o, [k for k, d in zip(which, spared) if d], kappas[spared], True))
+            which, kappas = [k for k, d in zip(which, spared) if not d], kappas[~spared]
+        groups.append((o, which, kappas, False))
+    for o, which, kappas, direct in groups:
+        if not which:
+            continue
+        if direct:
+            all_values = _evaluate_disk(coeffs, kappas, n)
+        elif faithful and o <= DIRECT_MAX_ORDER:
             all_values = sh_evaluate(coeffs[: o * o], kappas, anglemap_directions(n)[inside], faithful)
+        elif not faithful and o <= RINGS_MAX_ORDER:
+            all_values = _evaluate_disk_rings(coeffs, kappas, n)
         elif not faithful and (o <= DIRECT_MAX_ORDER or o > GRID_MAX_ORDER):
             all_values = _evaluate_disk(coeffs, kappas, n)
         else:

@@ -192,3 +192,24 @@ def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den): 
             out[t, 1] = a1 / d if d > 0 else 0.0
         if channels > 2:
             out[t, 2] = a2 / d if d > 0 else 0.0
+
+
+@numba.njit(parallel=True, cache=True)
+def sum_azimuths(radial, ring, cos_phi, sin_phi, texel, out):  # pragma: no cover (compiled)
+    """out[k] = sum_m radial[ring[k], m, 0] cos(m phi_k) + radial[ring[k], m, 1] sin(m phi_k) per channel:
+    the low-order SH series at texels from their rings' Legendre sums radial (rings, order, 2, C); cos and
+    sin of m phi by the angle-addition recurrence. Texels sorted by ring read each ring's row of radial
+    from the cache; texel[k] is where the k-th goes in out."""
+    order = radial.shape[1]
+    channels = radial.shape[3]
+    for k in numba.prange(ring.size):
+        r = ring[k]
+        t = texel[k]
+        c1, s1 = cos_phi[k], sin_phi[k]
+        cm, sm = 1.0, 0.0
+        for c in range(channels):
+            out[t, c] = radial[r, 0, 0, c]
+        for m in range(1, order):
+            cm, sm = cm * c1 - sm * s1, sm * c1 + cm * s1
+            for c in range(channels):
+                out[t, c] += radial[r, m, 0, c] * cm + radial[r, m, 1, c] * sm
