@@ -438,3 +438,24 @@ def test_one_bounce_under_the_arch_adds_what_a_two_level_monte_carlo_sum_says():
     estimate = np.pi * sent / len(rays)
     assert (np.abs(added - estimate) < 0.15 * estimate).all(), (added, estimate)
     assert (added > 0.02 * (direct.shadowed @ light)[0]).all()
+
+
+def test_transfers_are_kept_in_the_cache_folder_and_not_at_all_when_it_is_off(tmp_path, monkeypatch):
+    from arsim.lighting.prt import Transfer, cached_transfer
+
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return Transfer(np.ones((2, 9, 4), np.float32), np.ones((2, 4), np.float32), np.ones((2, 4), np.float32), 2)
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("ARSIM_CACHE", "off")
+    cached_transfer("k", compute)
+    cached_transfer("k", compute)
+    assert len(calls) == 2 and list(tmp_path.iterdir()) == []  # (no folder named "off", nothing kept)
+    monkeypatch.setenv("ARSIM_CACHE", str(tmp_path / "cache"))
+    first = cached_transfer("k", compute)
+    again = cached_transfer("k", compute)
+    assert len(calls) == 3 and (tmp_path / "cache" / "prt" / "k.npz").is_file()
+    np.testing.assert_array_equal(first.matrices, again.matrices)

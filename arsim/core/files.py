@@ -161,3 +161,26 @@ def staged_folder(path: str | os.PathLike, command: str) -> Iterator[Path]:
             os.rename(tmp, target)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+
+CACHE_ENV = "ARSIM_CACHE"  # arsim's cache folder, or "off" (no cache)
+
+
+def platform_cache_dir() -> Path:
+    """The user's cache folder for arsim: platformdirs' where it is installed, else $XDG_CACHE_HOME/arsim
+    (~/.cache/arsim)."""
+    try:
+        import platformdirs
+    except ImportError:
+        return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "arsim"
+    return Path(platformdirs.user_cache_dir("arsim"))
+
+
+def user_cache_dir() -> Path | None:
+    """arsim's cache folder (the run cache's entries, PRT transfers): $ARSIM_CACHE, None where it says "off",
+    else platform_cache_dir()."""
+    given = os.environ.get(CACHE_ENV, "").strip()
+    if given.lower() == "off":
+        return None
+    return Path(given).expanduser() if given else platform_cache_dir()

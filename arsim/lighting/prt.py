@@ -35,7 +35,7 @@ import scipy.sparse
 import scipy.special
 
 from arsim.core.errors import ArsimError
-from arsim.core.files import write_bytes_atomic
+from arsim.core.files import user_cache_dir, write_bytes_atomic
 from arsim.lighting.bases.functions import get_basis, sh9
 from arsim.lighting.bases.irradiance import COSINE_KERNEL
 from arsim.lighting.bases.projection import from_sh9_matrix
@@ -432,10 +432,11 @@ def compress(matrices: np.ndarray, clusters: int = 64, vectors: int = 4, seed: i
 # The cache on disk
 
 
-def cache_folder() -> Path:
-    """Where transfers are kept: $ARSIM_CACHE/prt, else ~/.cache/arsim/prt."""
-    root = os.environ.get("ARSIM_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "arsim")
-    return Path(root) / "prt"
+def cache_folder() -> Path | None:
+    """Where transfers are kept: prt/ in arsim's cache folder (core.files.user_cache_dir); None where
+    $ARSIM_CACHE is off (computed every time)."""
+    root = user_cache_dir()
+    return None if root is None else root / "prt"
 
 
 def transfer_key(*parts) -> str:
@@ -452,7 +453,10 @@ def transfer_key(*parts) -> str:
 
 def cached_transfer(key: str, compute: Callable[[], Transfer]) -> Transfer:
     """The transfer kept under key, or computed and kept (atomically; an unwritable cache only costs time)."""
-    path = cache_folder() / f"{key}.npz"
+    folder = cache_folder()
+    if folder is None:
+        return compute()
+    path = folder / f"{key}.npz"
     if path.is_file():
         try:
             with np.load(path) as f:

@@ -29,8 +29,9 @@ import numpy as np
 
 from arsim import __version__
 from arsim.core.errors import ArsimError
+from arsim.core.files import CACHE_ENV, platform_cache_dir, user_cache_dir
 
-ENV_VAR = "ARSIM_CACHE"  # a folder, or "off" (no cache)
+ENV_VAR = CACHE_ENV  # a folder, or "off" (no cache)
 MAX_BYTES_VAR = "ARSIM_CACHE_MAX_GB"
 DEFAULT_MAX_GB = 20.0  # the least recently used entries go beyond it
 ENTRY = "entry.json"
@@ -40,27 +41,15 @@ PACKAGE = Path(__file__).resolve().parents[1]  # arsim/
 
 
 def default_cache_dir() -> Path:
-    """$ARSIM_CACHE; else the user's cache folder: platformdirs' where it is installed, else
-    $XDG_CACHE_HOME/arsim (~/.cache/arsim)."""
-    given = os.environ.get(ENV_VAR, "").strip()
-    if given and given.lower() != "off":
-        return Path(given).expanduser()
-    try:
-        import platformdirs
-    except ImportError:
-        return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "arsim"
-    return Path(platformdirs.user_cache_dir("arsim"))
+    """$ARSIM_CACHE; else (also where it is off) the user's cache folder (core.files.platform_cache_dir)."""
+    return user_cache_dir() or platform_cache_dir()
 
 
 def cache_folder(given: Path | None, disabled: bool) -> Path | None:
     """The cache a run uses: --cache DIR, else the default; None with --no-cache or ARSIM_CACHE=off."""
     if disabled:
         return None
-    if given is not None:
-        return given
-    if os.environ.get(ENV_VAR, "").strip().lower() == "off":
-        return None
-    return default_cache_dir()
+    return given if given is not None else user_cache_dir()
 
 
 # ---------------------------------------------------------------------------------------------------
