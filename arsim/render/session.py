@@ -7,7 +7,6 @@ the profiler. What the poses and the timings measure is the evaluation's (arsim.
 
 from __future__ import annotations
 
-import contextlib
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -101,51 +100,6 @@ def check_maps(maps: dict[str, MapSet], needed: dict[str, list[float]]) -> None:
                              f"({held}); bake them: arsim bake PROBE.exr -o DIR --method {name} --spec {spec}")
 
 
-# A session scoring at least this many frames scores them in a worker process beside the render loop: FLIP
-# holds the GIL (a thread would not overlap it), and a process takes about a second to start.
-SCORE_WORKER_FRAMES = 24
-
-
-class _Scores:
-    """The scorer's calls, in a worker process where the scorer can be sent to one (a module's function) and
-    there are enough of them, else at once; `value` of what `submit` gave is the score either way."""
-
-    def __init__(self, score: Scorer, calls: int):
-        self.score, self.pool = score, None
-        if calls >= SCORE_WORKER_FRAMES:
-            import multiprocessing
-            import pickle
-            from concurrent.futures import ProcessPoolExecutor
-
-            try:
-                pickle.dumps(score)
-            except (pickle.PicklingError, AttributeError, TypeError):
-                return
-            # (spawned, not forked: this process holds a GL context and threads)
-            self.pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
-
-    def submit(self, reference: np.ndarray, test: np.ndarray, mask: np.ndarray):
-        if self.pool is None:
-            return self.score(reference, test, mask)
-        return self.pool.submit(self.score, reference.copy(), test.copy(), mask.copy())
-
-    @staticmethod
-    def value(submitted) -> float:
-        return float(submitted.result() if hasattr(submitted, "result") else submitted)
-
-    def close(self) -> None:
-        if self.pool is not None:
-            self.pool.shutdown(cancel_futures=True)
-
-
-@contextlib.contextmanager
-def scores_closed(scores: _Scores):
-    try:
-        yield scores
-    finally:
-        scores.close()
-
-
 def _camera_and_tracker(rec: Recording, linear_of_code: np.ndarray, settings: SessionSettings) -> tuple:
     """The recording's camera, and a tracker for its table's tag that linearises frames with linear_of_code
     (fused with the recording's IMU where the settings say)."""
@@ -195,9 +149,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     shading = Shading(settings.key, settings.white, settings.log_average)
     loop = FrameLoop(ctx, tracker, captured, shading, settings.overlay, settings.method, lights=settings.lights,
                      light_frames=count, tracked=tracked)
-    scores = _Scores(score, -(-count // settings.flip_every) + len(saved) if true_light is not None else 0)
-    pending, estimate_pending = {}, {}  # (frame n -> its score as submitted; (estimator, frame index) -> likewise)
-    with scores_closed(scores), atomic_path(out_dir / "session.mp4") as video_path:
+    with atomic_path(out_dir / "session.mp4") as video_path:
         video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
         frames = read_frames(rec.folder / rec.frames[k]["file"] for k in indices)  # (decoded ahead of the loop)
         for n, (k, frame) in enumerate(zip(indices, frames)):
@@ -227,24 +179,19 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                 truth_frame = _lit_frame(true_light, pose, time_s, frame, settings, overlay_box, out)
                 if overlay_box is not None:
                     mask[overlay_box] = False
-                if mask.any():
-                    pending[n] = scores.submit(truth_frame, out, mask)
+                flips[n] = score(truth_frame, out, mask) if mask.any() else np.nan
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
                 if estimated and k in saved and mask.any():
                     lit = {name: _lit_frame(r, pose, time_s, frame, settings, overlay_box, out) for name, r in estimated.items()}
                     estimate_frames[int(k)] = {"truth_frame": truth_frame, "mask": mask, "lit": lit}
                     for name, image in lit.items():
-                        estimate_pending[name, int(k)] = scores.submit(truth_frame, image, mask)
+                        estimate_scores[name][int(k)] = score(truth_frame, image, mask)
             video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))
             if k in saved:
                 write_bytes_atomic(out_dir / "frames" / f"{k:06d}.png", png_bytes(out))
             if n % 10 == 0 or n == count - 1:
                 progress((n + 1) / count)
         video.release()
-        for n, submitted in pending.items():
-            flips[n] = scores.value(submitted)
-        for (name, k), submitted in estimate_pending.items():
-            estimate_scores[name][k] = scores.value(submitted)
     return SessionResult(indices, poses, flips, step_ms, gl_ms, records, estimate_frames, estimate_scores,
                          true_light is not None)
 
