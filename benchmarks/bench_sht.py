@@ -229,12 +229,6 @@ def main() -> None:
         print(f"  sh order 256 (coefficients + nine maps): {sh_s:.2f} s; ducc0 alone (3 analyses + 27 syntheses of "
               f"its {n_theta}x{n_phi} grid): {ducc_s:.2f} s; ratio {sh_s / ducc_s:.2f}x")
 
-        if name == args.assets.split(",")[0] and not args.skip_windows:
-            sh64 = bake(env, EXPONENTS, "sh", MapParameters(sh_order=64))
-            mc = bake(env, EXPONENTS, "mc", MapParameters(samples=64))
-            print(f"  mc, 64 samples: {mc.seconds_total:.1f} s; sh order 64: {sh64.seconds_total:.2f} s; "
-                  f"mc/sh64 = {mc.seconds_total / sh64.seconds_total:.1f}x")
-
         if not args.quick and not args.skip_windows:
             orders = [8, 16, 32, 64, 128, 256]
             print(f"  sh mean error % against brute force 512², by window and order {orders}:")
