@@ -148,11 +148,12 @@ def _second_ends(times: np.ndarray, k: int) -> bool:
 
 def accumulate_frames(rec: Recording, orientations: Rotation, response: RecoveredResponse, size: int,
                       progress: Callable[[float, float], None] = lambda fraction, coverage: None,
-                      snapshots: list | None = None) -> ProbeAccumulator:
+                      snapshots: list | None = None, checked: bool = False) -> ProbeAccumulator:
     """Every frame of the recording accumulated into a size x size angle map at the given camera-to-world
     orientations (K,), linearised with the response: the refined pass, or (true orientations, true
     response) the ideal merge that bounds what any capture of the same frames can do. snapshots: a list
-    that gets (time s, probe_snapshot) about once a second and at the end."""
+    that gets (time s, probe_snapshot) about once a second and at the end. checked: the frames were read and
+    checked before by this process (core.png.png_problem is not run again)."""
     scenario = recording_scenario(rec)
     bracket = scenario.capture.bracket_ev
     sensor = SensorSettings.of(scenario.device.camera)
@@ -161,7 +162,7 @@ def accumulate_frames(rec: Recording, orientations: Rotation, response: Recovere
     accumulator = new_accumulator(size, camera, recording_falloff(rec, camera, sensor), sensor, len(levels))
     files, scales, gain = [rec.folder / f["file"] for f in rec.frames], exposure_scales(rec, sensor), gains(rec, sensor)
     times = np.array([f["t_ns"] for f in rec.frames]) / 1e9
-    for k, codes in enumerate(read_frames(files)):
+    for k, codes in enumerate(read_frames(files, check=not checked)):
         accumulator.add(codes, response.linear / scales[k], orientations[k].as_matrix(), scales[k],
                         levels.index(bracket[k % len(bracket)]), gain[k])
         if snapshots is not None and _second_ends(times, k):
@@ -247,6 +248,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     final = refinement.orientations if refinement.loop_closures else online
     snapshots = []
     accumulator = accumulate_frames(rec, final, response, settings.size,
-                                    lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage), snapshots)
+                                    lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage), snapshots,
+                                    checked=True)  # (the online pass read and checked every frame)
     return CaptureResult(accumulator, response, times, truth, uncorrected, final, online, aligned,
                          time.perf_counter() - start, seconds_online, gyro_bias, refinement, snapshots)

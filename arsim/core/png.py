@@ -124,10 +124,11 @@ def png_problem(data: bytes) -> str | None:
     return None
 
 
-def read_frame(path: Path) -> np.ndarray:
-    """(H, W, 3) uint8 RGB of an 8-bit image file (a recording's frame, a run's rendered frame)."""
+def read_frame(path: Path, check: bool = True) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of an 8-bit image file (a recording's frame, a run's rendered frame). check=False
+    leaves out png_problem, for a file this process has read and checked before."""
     data = Path(path).read_bytes()
-    problem = png_problem(data)
+    problem = png_problem(data) if check else None
     if problem is not None:
         raise ArsimError(f"{path}: {problem}; give an intact 8-bit PNG file (a recording's frame: record it again)")
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
@@ -137,7 +138,7 @@ def read_frame(path: Path) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
-def read_frames(paths: Iterable[Path], workers: int = 2, ahead: int = 8) -> Iterator[np.ndarray]:
+def read_frames(paths: Iterable[Path], workers: int = 2, ahead: int = 8, check: bool = True) -> Iterator[np.ndarray]:
     """read_frame of each path in order, decoded ahead on `workers` threads (the checks and OpenCV's decoding
     release the GIL, so they overlap the caller's work), at most `ahead` frames held at once."""
     from concurrent.futures import ThreadPoolExecutor
@@ -145,7 +146,7 @@ def read_frames(paths: Iterable[Path], workers: int = 2, ahead: int = 8) -> Iter
     pending = collections.deque()
     with ThreadPoolExecutor(workers) as pool:
         for path in paths:
-            pending.append(pool.submit(read_frame, path))
+            pending.append(pool.submit(read_frame, path, check))
             if len(pending) > ahead:
                 yield pending.popleft().result()
         while pending:
