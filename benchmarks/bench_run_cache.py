@@ -1,7 +1,8 @@
 """The run cache's savings (prints figures; not a test): a scenario run into a new cache (cold), again
 (warm: every stage reused), and with only [render] key changed (the session and report computed); then
 `arsim batch` of the scenario and two variants sharing its recording ([render] key, [render] map_size) into
-a new cache. Per run: the wall time and per stage computed or reused with its seconds (manifest.json).
+a new cache, and the same batch with --no-cache (the time the cache saved). Per run: the wall time and per
+stage computed or reused with its seconds (manifest.json).
 
     python benchmarks/bench_run_cache.py [SCENARIO] [--work DIR]     # default: the embedded default scenario
 """
@@ -52,6 +53,9 @@ def main() -> None:
     print(f"batch of {len(variants)} sharing a recording: {wall:.1f} s wall")
     for name in variants:
         print(f"  {name}: {stages(work / 'batch' / name)}")
+    alone = run("batch", *(work / f"{n}.toml" for n in variants), "-o", work / "batch_alone", "--no-cache", "--force")
+    print(f"the same batch with --no-cache (every stage of every run computed): {alone:.1f} s wall; "
+          f"the cache saved {alone - wall:.1f} s ({100 * (alone - wall) / alone:.0f} %)")
 
 
 if __name__ == "__main__":
