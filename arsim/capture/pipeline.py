@@ -221,8 +221,11 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
                 aligned[k] = True
                 predicted = drift.correction() * uncorrected[k]
         corrected.append(predicted)
-        accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale,
-                        exposure_levels.index(bracket[index]), gain[k])
+        # With the refined pass to come, this probe only serves the alignment, which renders it at the metered
+        # exposure: the bracketed frames, dark but for highlights that render clipped there, are left out of it.
+        if final_online or index == 0:
+            accumulator.add(codes, response.linear / exposure_scale, predicted.as_matrix(), exposure_scale,
+                            exposure_levels.index(bracket[index]), gain[k])
         if final_online and _second_ends(times, k):  # (the online probe is the final one: its growth kept)
             online_snapshots.append((float(times[k] - times[0]), probe_snapshot(accumulator)))
         if k % 30 == 0 or k == len(rec.frames) - 1:
