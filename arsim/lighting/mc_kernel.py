@@ -47,6 +47,17 @@ def _atan2_upper(y, x):  # pragma: no cover (compiled)
 
 
 @numba.njit(inline="always")
+def _level_texel(size, offset, s, t):  # pragma: no cover (compiled)
+    """Where a bilinear read at texture coordinates (s, t) starts in a bordered level of side `size` whose
+    texels begin at `offset` of the flat chain: its flat texel index, the row stride and the fractions down a
+    row and along it. Rows and columns in the bordered level (+1) are >= 0.5, so truncation is floor."""
+    row = (1.0 - t) * size + 0.5
+    col = s * size + 0.5
+    r0, c0 = int(row), int(col)
+    return offset + r0 * (size + 2) + c0, size + 2, row - r0, col - c0
+
+
+@numba.njit(inline="always")
 def _bilinear_at(flat, at, stride, fr, fc):  # pragma: no cover (compiled)
     """The bilinear RGB of texels at, at + 1, at + stride, at + stride + 1 (RGBA, flat index in texels)
     with fractions fr (down a row) and fc (along it). The levels' copied border makes this clamp-to-edge,
@@ -143,21 +154,8 @@ def mc_values(dirs, turns, cos_t, along_t, along_b, lod_base, flat, offsets, siz
                 lower = int(lod)
                 frac = lod - lower
                 upper = min(lower + 1, n_levels - 1)
-                # rows and columns in bordered levels (+1): >= 0.5, so truncation is floor
-                size = sizes[lower]
-                row = (1.0 - tt[j]) * size + 0.5
-                col = ss[j] * size + 0.5
-                r0, c0 = int(row), int(col)
-                at_lo[j] = offsets[lower] + r0 * (size + 2) + c0
-                stride_lo[j] = size + 2
-                fr_lo[j], fc_lo[j] = row - r0, col - c0
-                size = sizes[upper]
-                row = (1.0 - tt[j]) * size + 0.5
-                col = ss[j] * size + 0.5
-                r0, c0 = int(row), int(col)
-                at_hi[j] = offsets[upper] + r0 * (size + 2) + c0
-                stride_hi[j] = size + 2
-                fr_hi[j], fc_hi[j] = row - r0, col - c0
+                at_lo[j], stride_lo[j], fr_lo[j], fc_lo[j] = _level_texel(sizes[lower], offsets[lower], ss[j], tt[j])
+                at_hi[j], stride_hi[j], fr_hi[j], fc_hi[j] = _level_texel(sizes[upper], offsets[upper], ss[j], tt[j])
                 ll[j] = frac
             acc_r = acc_g = acc_b = 0.0
             for j in range(samples):  # the reads: independent, so their latencies overlap
