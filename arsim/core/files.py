@@ -163,7 +163,6 @@ def staged_folder(path: str | os.PathLike, command: str) -> Iterator[Path]:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-
 CACHE_ENV = "ARSIM_CACHE"  # arsim's cache folder, or "off" (no cache)
 
 

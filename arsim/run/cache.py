@@ -29,9 +29,8 @@ import numpy as np
 
 from arsim import __version__
 from arsim.core.errors import ArsimError
-from arsim.core.files import CACHE_ENV, platform_cache_dir, user_cache_dir
+from arsim.core.files import platform_cache_dir, user_cache_dir
 
-ENV_VAR = CACHE_ENV  # a folder, or "off" (no cache)
 MAX_BYTES_VAR = "ARSIM_CACHE_MAX_GB"
 DEFAULT_MAX_GB = 20.0  # the least recently used entries go beyond it
 ENTRY = "entry.json"

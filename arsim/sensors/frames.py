@@ -99,22 +99,18 @@ def check_frame_pixels(rec: Recording, progress=lambda fraction: None) -> int:
     """Decode every frame and burst frame of a recording (load_recording reads only their headers): one
     ArsimError naming the first that cannot be decoded or is not the camera's size; returns the count."""
     import os
-    from concurrent.futures import ThreadPoolExecutor
 
-    from arsim.core.png import read_frame
+    from arsim.core.png import read_frames
 
     cam = rec.meta["camera"]
     files = [f["file"] for f in rec.frames] + [b["file"] for b in rec.burst]
-
-    def size(name: str) -> tuple[int, int]:
-        return read_frame(rec.folder / name).shape[:2]
-
-    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:  # (OpenCV decodes without the GIL)
-        for k, (name, shape) in enumerate(zip(files, pool.map(size, files))):
-            if shape != (cam["height"], cam["width"]):
-                raise ArsimError(f"{rec.folder / name}: decodes to {shape[1]} x {shape[0]}, the camera's frames "
-                                 f"are {cam['width']} x {cam['height']}; record again")
-            if k % 64 == 0:
-                progress(k / len(files))
+    decoded = read_frames((rec.folder / name for name in files), workers=os.cpu_count() or 1)
+    for k, (name, frame) in enumerate(zip(files, decoded)):
+        shape = frame.shape[:2]
+        if shape != (cam["height"], cam["width"]):
+            raise ArsimError(f"{rec.folder / name}: decodes to {shape[1]} x {shape[0]}, the camera's frames "
+                             f"are {cam['width']} x {cam['height']}; record again")
+        if k % 64 == 0:
+            progress(k / len(files))
     progress(1.0)
     return len(files)
