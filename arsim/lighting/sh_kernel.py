@@ -194,22 +194,37 @@ def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den): 
             out[t, 2] = a2 / d if d > 0 else 0.0
 
 
-@numba.njit(parallel=True, cache=True)
-def sum_azimuths(radial, ring, cos_phi, sin_phi, texel, out):  # pragma: no cover (compiled)
-    """out[k] = sum_m radial[ring[k], m, 0] cos(m phi_k) + radial[ring[k], m, 1] sin(m phi_k) per channel:
-    the low-order SH series at texels from their rings' Legendre sums radial (rings, order, 2, C); cos and
-    sin of m phi by the angle-addition recurrence. Texels sorted by ring read each ring's row of radial
-    from the cache; texel[k] is where the k-th goes in out."""
-    order = radial.shape[1]
-    channels = radial.shape[3]
-    for k in numba.prange(ring.size):
-        r = ring[k]
-        t = texel[k]
-        c1, s1 = cos_phi[k], sin_phi[k]
-        cm, sm = 1.0, 0.0
-        for c in range(channels):
-            out[t, c] = radial[r, 0, 0, c]
-        for m in range(1, order):
-            cm, sm = cm * c1 - sm * s1, sm * c1 + cm * s1
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def ring_series(legendre, first, weights, ring_start, cos_phi, sin_phi, texel, out):  # pragma: no cover (compiled)
+    """The low-order SH series at the texels, ring by ring of equal polar angle. Per ring r, its Legendre sums
+    radial[j, c, m] = sum_l legendre[r, first[m] + l - m] weights[j, c, first[m] + l - m] (j = 0: the cos
+    term of m, 1: the sin term), kept in a small buffer; then per texel k of the ring (texels sorted by ring,
+    ring r's from ring_start[r] to ring_start[r + 1]) out[texel[k], c] = sum_m radial[0, c, m] cos(m phi_k)
+    + radial[1, c, m] sin(m phi_k), cos and sin of m phi by the angle-addition recurrence. legendre (rings,
+    order (order + 1) / 2): the orthonormal P_lm packed m by m (first[m]: where m's start). The innermost
+    loops run over contiguous memory, as dot products the compiler vectorises."""
+    order = first.size - 1
+    channels = weights.shape[1]
+    for r in numba.prange(ring_start.size - 1):
+        radial = np.empty((2, channels, order))
+        row = legendre[r]
+        for j in range(2):
             for c in range(channels):
-                out[t, c] += radial[r, m, 0, c] * cm + radial[r, m, 1, c] * sm
+                w = weights[j, c]
+                for m in range(order):
+                    total = 0.0
+                    for i in range(first[m], first[m + 1]):
+                        total += row[i] * w[i]
+                    radial[j, c, m] = total
+        cos_m, sin_m = np.empty(order), np.empty(order)
+        cos_m[0], sin_m[0] = 1.0, 0.0
+        for k in range(ring_start[r], ring_start[r + 1]):
+            c1, s1 = cos_phi[k], sin_phi[k]
+            for m in range(1, order):
+                cos_m[m] = cos_m[m - 1] * c1 - sin_m[m - 1] * s1
+                sin_m[m] = sin_m[m - 1] * c1 + cos_m[m - 1] * s1
+            for c in range(channels):
+                total = 0.0
+                for m in range(order):
+                    total += radial[0, c, m] * cos_m[m] + radial[1, c, m] * sin_m[m]
+                out[texel[k], c] = total
