@@ -25,7 +25,12 @@ from arsim.core.png import png_bytes, read_frame
 
 IMAGE_SUFFIXES = (".png",)
 DEFAULT_MAX_FLIP = 0.0  # a frame fails when its mean FLIP exceeds this: by default, any difference
-FLIP_MARGIN = 32  # pixels around the differing ones: beyond FLIP's filters at its default 67 pixels per degree
+# How far FLIP's filters reach at its default 67 pixels per degree: the colour pipeline's widest CSF Gaussian
+# (b = 0.04 deg²) has radius ceil(3 sqrt(0.04 / (2 pi²)) 67) = 10 pixels, the feature detectors' ceil(3 x 0.5 x
+# 0.082 x 67) = 9. A pixel's error depends on the pixels within this distance only (no image-wide normalisation
+# in LDR FLIP), so a box this much wider than the pixels scored gives them their full-frame values exactly; a box
+# twice as wide gives every pixel of the box its full-frame value (those near its edge included).
+FLIP_RADIUS = 10
 
 
 @dataclass(frozen=True)
@@ -116,14 +121,15 @@ def magma(error: np.ndarray) -> np.ndarray:
     return (255 * colormaps["magma"](np.clip(error, 0.0, 1.0))[..., :3] + 0.5).astype(np.uint8)
 
 
-def flip_map(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> np.ndarray:
+def flip_map(a: np.ndarray, b: np.ndarray, where: np.ndarray, margin: int = 2 * FLIP_RADIUS) -> np.ndarray:
     """(H, W) LDR FLIP of 8-bit b against a, evaluated on the box around the pixels `where` widened by
-    FLIP_MARGIN, 0 outside it (where the frames are equal, or outside what is measured)."""
+    `margin`, 0 outside it. The default margin gives the whole map its full-frame values (0 beyond FLIP_RADIUS
+    of any pixel where the frames differ); FLIP_RADIUS gives them to the pixels `where` only."""
     import flip_evaluator
 
     rows, cols = np.flatnonzero(where.any(axis=1)), np.flatnonzero(where.any(axis=0))
-    box = (slice(max(rows[0] - FLIP_MARGIN, 0), rows[-1] + FLIP_MARGIN + 1),
-           slice(max(cols[0] - FLIP_MARGIN, 0), cols[-1] + FLIP_MARGIN + 1))
+    box = (slice(max(rows[0] - margin, 0), rows[-1] + margin + 1),
+           slice(max(cols[0] - margin, 0), cols[-1] + margin + 1))
     error_box, _, _ = flip_evaluator.evaluate(np.ascontiguousarray(a[box], dtype=np.float32) / 255,
                                               np.ascontiguousarray(b[box], dtype=np.float32) / 255, "LDR", applyMagma=False)
     error_box = np.asarray(error_box)
@@ -134,9 +140,9 @@ def flip_map(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> np.ndarray:
 
 def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
     """Mean FLIP (LDR, sRGB inputs) of two 8-bit frames over the masked pixels, evaluated on the mask's
-    bounding box widened beyond FLIP's filters (the whole frame costs most of a second at 640 x 480): the
-    AR session's score of each frame against its truth frame."""
-    return float(flip_map(reference, test, mask)[mask].mean())
+    bounding box widened by FLIP's reach only (the whole frame costs most of a second at 640 x 480; the
+    masked pixels get their full-frame values): the AR session's score of each frame against its truth frame."""
+    return float(flip_map(reference, test, mask, margin=FLIP_RADIUS)[mask].mean())
 
 
 def compare_images(a: np.ndarray, b: np.ndarray, name: str = "") -> tuple[FrameDiff, np.ndarray | None]:
