@@ -40,7 +40,7 @@ from arsim.lighting.accurate import lobe_average_at  # noqa: E402
 from arsim.lighting.methods import MapParameters, bake  # noqa: E402
 from arsim.lighting.phong import phong_zonal_coefficients  # noqa: E402
 from arsim.lighting.sh import WINDOWS, synthesis_grid_size  # noqa: E402
-from arsim.lighting.sht import sh_angles, sht_maps_from_source  # noqa: E402
+from arsim.lighting.sht import disk_locations, sh_angles, sht_maps_from_source  # noqa: E402
 
 EXPONENTS = [1, 2, 10, 20, 40, 80, 160, 320, 1280]
 SHT = ducc0.sht.experimental
@@ -157,6 +157,24 @@ def speed(names, texels: int) -> None:
         print("  sh by order (nine maps), seconds and ratio to order 64: " + ", ".join(
             f"{o}: {t:.3f} ({t / times[64]:.2f}x)" for o, t in times.items()))
         print(f"  worst ratio {max(times.values()) / times[64]:.2f}x, best {min(times.values()) / times[64]:.2f}x")
+        # What the transform itself costs at each order on the same texels (3 analyses and 27 syntheses, all
+        # bands, ducc0's non-uniform transforms): its own growth with the order bounds any SH path built on it.
+        loc = disk_locations(512)
+        values = np.random.default_rng(0).random((1, loc.shape[0]))
+
+        def transforms(order):
+            alms = [SHT.adjoint_synthesis_general(map=values, spin=0, lmax=order - 1, loc=loc, epsilon=1e-10, nthreads=0)
+                    for _ in range(3)]
+            for _ in EXPONENTS:
+                for a in alms:
+                    SHT.synthesis_general(alm=a, spin=0, lmax=order - 1, loc=loc, epsilon=1e-10, nthreads=0)
+
+        alone = {}
+        for order in (64, 256, 512, 1024):
+            transforms(order)
+            alone[order] = best_of(3, lambda: transforms(order))
+        print("  ducc0 alone on the disk texels (3 analyses + 27 syntheses), seconds, its ratio to its order 64, and sh's "
+              "time over it: " + ", ".join(f"{o}: {t:.3f} ({t / alone[64]:.2f}x; sh {times[o] / t:.2f}x)" for o, t in alone.items()))
 
 
 def main() -> None:
