@@ -355,6 +355,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = args.output
     flip = (f"FLIP against the truth frame {metrics['flip_mean']:.4f}" if "flip_mean" in metrics
             else "not scored (the true environment is unknown)")
+    if metrics.get("lit_by_truth"):
+        flip += " (0 by construction, not a result: the objects were lit by the true environment's own maps)"
     print(f"rendered {metrics['frames_total']} frames ({metrics['frames_lost']} lost) into {out}: {_tracking_p95(metrics)}; "
           f"{flip}; metrics in {out / 'metrics.json'}")
     for why in metrics.get("truth", {}).values():
@@ -706,7 +708,7 @@ def cmd_prt_compare(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from arsim.evaluate.diff import frames_of, run_diff, update_baseline
+    from arsim.evaluate.diff import baseline_figures, frames_of, run_diff, update_baseline
     from arsim.run.pipeline import run_scenario
 
     scenario = load_scenario(args.scenario)
@@ -722,8 +724,9 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     cache = StageCache(cache_folder(args.cache, args.no_cache))
     result = None
+    baseline_metrics = baseline_figures(args.baseline) if args.baseline is not None and not args.update_baseline else None
     with _output(args, _scenario_file(args.scenario), args.recording, args.baseline) as work:
-        manifest = run_scenario(scenario, source, work, args.recording, _bar, cache)
+        manifest = run_scenario(scenario, source, work, args.recording, _bar, cache, baseline_metrics)
         if args.baseline is not None and not args.update_baseline:
             result = run_diff(args.baseline, work, work / "diff", args.max_flip)
     out = args.output
@@ -796,10 +799,13 @@ def cmd_diff(args: argparse.Namespace) -> int:
 
     with (_output(args, args.a, args.b) if args.output is not None else contextlib.nullcontext()) as work, \
             progress_bar("comparing frames", 1.0) as update:
-        result = run_diff(args.a, args.b, work, args.max_flip, progress=lambda f: update(completed=f))
+        result = run_diff(args.a, args.b, work, args.max_flip, progress=lambda f: update(completed=f),
+                          gate_times=args.gate_times)
     out = args.output
     summary = result.summary()
     where = f"; page {out / 'index.html'}" if out is not None else ""
+    if result.metrics:
+        print(result.metrics_table())
     print(f"{'passed' if result.passed else 'FAILED'}: {result.message()}\n"
           f"FLIP mean over frames {summary['flip_mean']:.5f}, worst {summary['flip_max']:.5f} ({summary['worst_frame']}){where}")
     return 0 if result.passed else 1
@@ -1109,14 +1115,19 @@ def _batch_parser(sub: argparse._SubParsersAction) -> None:
 
 def _diff_parser(sub: argparse._SubParsersAction) -> None:
     p = _command(sub, "diff", "visual regression: compare two images, or the frames of two run directories matched by name, "
-                 "by FLIP (mean and 99th percentile), PSNR and the largest difference; writes a heatmap per frame that "
-                 "differs and an HTML page; exit status 1 when a frame's mean FLIP exceeds --max-flip",
+                 "by FLIP (mean and 99th percentile), PSNR and the largest difference, and two runs' figures (every "
+                 "metric of metrics.json, both values and the change); writes a heatmap per frame that differs, "
+                 "metrics.md and an HTML page; exit status 1 when a frame's mean FLIP exceeds --max-flip or a figure "
+                 "got worse beyond its tolerance",
                  "arsim diff baseline run -o diff --max-flip 0.001   (or: arsim diff a.png b.png)")
     p.add_argument("a", type=_path, metavar="A", help="the reference: an image, a run directory or a folder of frames")
     p.add_argument("b", type=_path, metavar="B", help="what is compared with it (the same kind as A)")
     _output_option(p, "write heatmaps/, diff.json and index.html into this folder", required=False)
     p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
                    help=f"largest mean FLIP a frame may have (default {DEFAULT_MAX_FLIP:g}: any difference fails)")
+    p.add_argument("--gate-times", action="store_true",
+                   help="two runs: let times and speeds that got worse beyond their tolerance fail the diff too "
+                        "(by default they are listed only: they differ from run to run on any machine)")
     p.set_defaults(run=cmd_diff)
 
 

@@ -289,3 +289,51 @@ def test_the_manifest_does_not_list_itself(tmp_path):
     (tmp_path / "manifest.json").write_text("{}")
     assert _files_under(tmp_path, FILE_ROLES) == [{"path": "capture/env.exr", "role": FILE_ROLES["capture/env.exr"],
                                                    "bytes": 10}]
+
+
+def test_the_report_opens_with_verdicts_units_and_thresholds(runs):
+    page = (runs / "a" / "report" / "index.html").read_text()
+    summary = page[page.index('id="summary"'):page.index('id="capture"')]
+    assert page.index('id="summary"') < page.index('id="scenario"')  # the verdicts first, the scenario last
+    for stage in ("capture", "maps", "tracking", "AR frames", "frame budget"):
+        assert f"<td>{stage}</td>" in summary, stage
+    assert "degrees" in summary and "%" in summary and "pass ≤ 0.2500 degrees" in summary  # [report]'s defaults
+    assert summary.count('class="pass"') + summary.count('class="warn"') + summary.count('class="fail"') >= 5
+    assert 'href="../session.mp4"' in page and 'href="../manifest.json"' in page
+    # the frames shown beside their truth frames and FLIP maps; the maps beside the truth's and their error
+    assert (runs / "a" / "frames" / "truth" / "000000.png").is_file() and (runs / "a" / "report" / "frame_000000.png").is_file()
+    assert (runs / "a" / "report" / "maps_vs_truth.png").is_file()
+
+
+def test_every_figure_of_a_run_is_registered_with_a_unit_and_meaning(runs):
+    from arsim.evaluate.registry import figures_of, metric_for
+
+    figures = figures_of(json.loads((runs / "a" / "metrics.json").read_text()))
+    assert len(figures) > 60
+    unregistered = [p for p in figures if metric_for(p) is None]
+    assert not unregistered, unregistered
+    assert all(metric_for(p).meaning for p in figures)
+
+
+def test_diff_of_two_runs_lists_every_figure_and_fails_where_one_got_worse(runs, tmp_path):
+    import shutil
+
+    # the same run with one figure made worse beyond its tolerance (FLIP +50 %) and one time much worse (not gated)
+    worse = tmp_path / "worse"
+    shutil.copytree(runs / "a", worse)
+    metrics = json.loads((worse / "metrics.json").read_text())
+    flip = metrics["session"]["flip_mean"]
+    metrics["session"]["flip_mean"] = flip * 1.5 + 0.01
+    metrics["maps"]["mipmap"]["seconds"] *= 10
+    (worse / "metrics.json").write_text(json.dumps(metrics))
+    r = arsim("diff", runs / "a", worse, "-o", tmp_path / "d")
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "`session.flip_mean`" in r.stdout and "| worse |" in r.stdout and "worse (timed: not gated)" in r.stdout
+    summary = json.loads((tmp_path / "d" / "diff.json").read_text())
+    assert summary["metrics_worse"] == ["session.flip_mean"]
+    row = next(m for m in summary["metrics"] if m["path"] == "session.flip_mean")
+    assert row["a"] == pytest.approx(flip) and row["b"] == pytest.approx(flip * 1.5 + 0.01)
+    assert "| AR frames' FLIP |" in (tmp_path / "d" / "metrics.md").read_text()
+    # the other way round the FLIP got better: the frames are equal, nothing is worse but the time (not gated)
+    assert arsim("diff", worse, runs / "a").returncode == 0
+    assert arsim("diff", runs / "a", worse, "--gate-times").returncode == 1

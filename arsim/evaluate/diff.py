@@ -10,6 +10,7 @@ Identical frames cost a byte comparison.
 from __future__ import annotations
 
 import html
+import json
 import math
 import os
 import shutil
@@ -22,6 +23,7 @@ import numpy as np
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_bytes_atomic, write_text_atomic
 from arsim.core.png import png_bytes, read_frame
+from arsim.evaluate.registry import NEUTRAL, figures_of, label_of, metric_for, unit_text, worse_beyond_tolerance
 
 IMAGE_SUFFIXES = (".png",)
 DEFAULT_MAX_FLIP = 0.0  # a frame fails when its mean FLIP exceeds this: by default, any difference
@@ -47,6 +49,53 @@ class FrameDiff:
         return self.flip_mean > max_flip
 
 
+@dataclass(frozen=True)
+class MetricChange:
+    """One figure of two runs' metrics.json (evaluate.registry): both values (None where a run lacks it), the
+    change b - a, and whether b is worse beyond the figure's tolerance (gated: whether that fails the diff)."""
+    path: str
+    label: str
+    unit: str
+    better: str
+    a: float | None
+    b: float | None
+    worse: bool
+    gated: bool
+
+    @property
+    def change(self) -> float | None:
+        return None if self.a is None or self.b is None else self.b - self.a
+
+
+def compare_metrics(a: dict, b: dict, gate_times: bool = False) -> list[MetricChange]:
+    """Every figure of either run (figures_of), a's order first. Worse: beyond the registry's tolerance for the
+    worse; timed figures (times and speeds, which differ from run to run on any machine) are listed but gate the
+    diff only with gate_times."""
+    fa, fb = figures_of(a), figures_of(b)
+    out = []
+    for path in [*fa, *(p for p in fb if p not in fa)]:
+        m = metric_for(path)
+        va, vb = fa.get(path), fb.get(path)
+        worse = va is not None and vb is not None and worse_beyond_tolerance(m, va, vb)
+        out.append(MetricChange(path, label_of(path), m.unit if m else "", m.better if m else NEUTRAL, va, vb,
+                                worse, worse and (gate_times or not (m and m.timed))))
+    return out
+
+
+def baseline_figures(folder: Path) -> dict | None:
+    """A baseline's (a run directory's, or a baseline folder's) metrics.json, or None where it has none."""
+    path = Path(folder) / "metrics.json"
+    if not path.is_file():
+        return None
+    try:
+        metrics = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ArsimError(f"{path}: not readable as JSON ({e}); give a run directory written by `arsim run`") from None
+    if not isinstance(metrics, dict):
+        raise ArsimError(f"{path}: not a run's metrics (a JSON object); give a run directory written by `arsim run`")
+    return metrics
+
+
 @dataclass
 class DiffResult:
     a: str
@@ -55,14 +104,20 @@ class DiffResult:
     frames: list[FrameDiff] = field(default_factory=list)
     only_in_a: list[str] = field(default_factory=list)
     only_in_b: list[str] = field(default_factory=list)
+    metrics: list[MetricChange] = field(default_factory=list)  # where both are runs with metrics.json
 
     @property
     def failed(self) -> list[FrameDiff]:
         return [f for f in self.frames if f.exceeds(self.max_flip)]
 
     @property
+    def worse(self) -> list[MetricChange]:
+        """The figures that got worse beyond their tolerance and gate the diff."""
+        return [m for m in self.metrics if m.gated]
+
+    @property
     def passed(self) -> bool:
-        return not self.failed and not self.only_in_a and not self.only_in_b
+        return not self.failed and not self.only_in_a and not self.only_in_b and not self.worse
 
     def summary(self) -> dict:
         flips = [f.flip_mean for f in self.frames]
@@ -74,6 +129,8 @@ class DiffResult:
             "flip_mean": float(np.mean(flips)) if flips else 0.0,
             "flip_max": worst.flip_mean if worst else 0.0, "worst_frame": worst.name if worst else None,
             "per_frame": [{**asdict(f), "psnr_db": None if math.isinf(f.psnr_db) else f.psnr_db} for f in self.frames],
+            "metrics_worse": [m.path for m in self.worse],
+            "metrics": [asdict(m) | {"change": m.change} for m in self.metrics],
         }
 
     def message(self) -> str:
@@ -88,7 +145,25 @@ class DiffResult:
         for side, names in (("a", self.only_in_a), ("b", self.only_in_b)):
             if names:
                 lines.append(f"  {len(names)} frames only in {side} ({getattr(self, side)}), first {names[0]}")
+        if self.metrics:
+            lines.append(f"{len(self.metrics)} figures compared, {len(self.worse)} worse beyond their tolerance")
+            for m in self.worse[:8]:
+                lines.append(f"  {m.label} ({m.path}): {unit_text(metric_for(m.path), m.a)} -> {unit_text(metric_for(m.path), m.b)}")
+            if len(self.worse) > 8:
+                lines.append(f"  ... and {len(self.worse) - 8} more")
         return "\n".join(lines)
+
+    def metrics_table(self) -> str:
+        """Every figure as a markdown table: both values with their unit, the change, and whether it got worse."""
+        rows = ["| figure | key | a | b | change | better | verdict |", "|---|---|---|---|---|---|---|"]
+        for m in self.metrics:
+            metric = metric_for(m.path)
+            verdict = ("worse" if m.gated else "worse (timed: not gated)" if m.worse else
+                       "only in a" if m.b is None else "only in b" if m.a is None else "")
+            change = "" if m.change is None else f"{m.change:+.4g}"
+            rows.append(f"| {m.label} | `{m.path}` | {unit_text(metric, m.a) if m.a is not None else '-'} | "
+                        f"{unit_text(metric, m.b) if m.b is not None else '-'} | {change} | {m.better or '-'} | {verdict} |")
+        return "\n".join(rows) + "\n"
 
 
 def frames_of(folder: Path) -> dict[str, Path]:
@@ -170,12 +245,17 @@ def check_max_flip(max_flip: float, name: str = "the FLIP limit") -> float:
 
 
 def run_diff(a: Path, b: Path, out_dir: Path | None = None, max_flip: float = DEFAULT_MAX_FLIP,
-             progress: Callable[[float], None] = lambda fraction: None) -> DiffResult:
-    """Compare b against a; with out_dir, write heatmaps/<frame>.png for the frames that differ,
-    diff.json and index.html (a, b and the heatmap side by side)."""
+             progress: Callable[[float], None] = lambda fraction: None, gate_times: bool = False) -> DiffResult:
+    """Compare b against a: their frames, and where both hold a metrics.json (runs) every figure
+    (compare_metrics); with out_dir, write heatmaps/<frame>.png for the frames that differ, diff.json,
+    metrics.md and index.html (a, b and the heatmap side by side, the figures' table)."""
     check_max_flip(max_flip)
     pairs, only_a, only_b = image_pairs(a, b)
     result = DiffResult(str(a), str(b), max_flip, only_in_a=only_a, only_in_b=only_b)
+    if a.is_dir() and b.is_dir():
+        ma, mb = baseline_figures(a), baseline_figures(b)
+        if ma is not None and mb is not None:
+            result.metrics = compare_metrics(ma, mb, gate_times)
     if out_dir is not None:
         (out_dir / "heatmaps").mkdir(parents=True, exist_ok=True)
     for k, (name, path_a, path_b) in enumerate(pairs):
@@ -188,6 +268,8 @@ def run_diff(a: Path, b: Path, out_dir: Path | None = None, max_flip: float = DE
         progress((k + 1) / len(pairs))
     if out_dir is not None:
         write_text_atomic(out_dir / "diff.json", json_text(result.summary()))
+        if result.metrics:
+            write_text_atomic(out_dir / "metrics.md", result.metrics_table())
         write_text_atomic(out_dir / "index.html", diff_page(result, pairs, out_dir))
     return result
 
@@ -223,10 +305,27 @@ def diff_page(result: DiffResult, pairs: list[tuple[str, Path, Path]], out_dir: 
 <body><h1>arsim diff: {verdict}</h1>
 <p>a: {html.escape(result.a)}<br>b: {html.escape(result.b)}<br>{len(result.frames)} frames compared; {len(result.failed)} with a
 mean FLIP over {result.max_flip:g}; {sum(f.differing_pixels > 0 for f in result.frames)} differ at all.</p>{missing}
+{metrics_html(result)}
 <h2>Frames that differ</h2>{''.join(figures) or '<p>None: every frame is equal.</p>'}
 <h2>Every frame</h2><table><tr><th>frame</th><th>FLIP mean</th><th>FLIP p99</th><th>PSNR (dB)</th><th>max |a-b|</th><th>pixels differing</th></tr>
 {''.join(rows)}</table></body></html>
 """
+
+
+def metrics_html(result: DiffResult) -> str:
+    """The figures' table of the diff page (empty where the two are not runs with metrics)."""
+    if not result.metrics:
+        return ""
+    rows = []
+    for m in result.metrics:
+        metric = metric_for(m.path)
+        verdict = "worse" if m.gated else "worse (timed: not gated)" if m.worse else ""
+        rows.append(f"<tr class=\"{'over' if m.gated else ''}\"><td style=\"text-align:left\">{html.escape(m.label)}<br><small>"
+                    f"{html.escape(m.path)}</small></td><td>{html.escape(unit_text(metric, m.a)) if m.a is not None else '-'}</td>"
+                    f"<td>{html.escape(unit_text(metric, m.b)) if m.b is not None else '-'}</td>"
+                    f"<td>{'' if m.change is None else f'{m.change:+.4g}'}</td><td>{m.better or '-'}</td><td>{verdict}</td></tr>")
+    return (f"<h2>Figures ({len(result.worse)} worse beyond their tolerance)</h2><table><tr><th>figure</th><th>a</th><th>b</th>"
+            f"<th>change</th><th>better</th><th>verdict</th></tr>{''.join(rows)}</table>")
 
 
 def update_baseline(frames: str | os.PathLike, baseline: str | os.PathLike) -> Path:
@@ -240,4 +339,7 @@ def update_baseline(frames: str | os.PathLike, baseline: str | os.PathLike) -> P
         shutil.copy2(path, staging / name)
     shutil.rmtree(target, ignore_errors=True)
     staging.rename(target)  # (the old baseline is replaced whole, never left half-written)
+    metrics = Path(frames) / "metrics.json"
+    if metrics.is_file():  # (its figures: a run against the baseline shows them beside its own)
+        write_bytes_atomic(Path(baseline) / "metrics.json", metrics.read_bytes())
     return target

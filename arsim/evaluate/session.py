@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from arsim.evaluate.tracking import TrackingRun, measure_poses
+from arsim.lighting.mapset import MapSet
 from arsim.render.session import SessionResult
 from arsim.sensors.frames import NO_SCENARIO
 from arsim.sensors.recording import Recording
@@ -30,3 +31,13 @@ def session_metrics(rec: Recording, session: SessionResult) -> tuple[TrackingRun
     figures |= {"step_ms": {name: float(np.median(v)) for name, v in session.step_ms.items() if v},
                 "step_gl_ms": {name: float(np.median(v)) for name, v in session.gl_ms.items() if v}}
     return tracking, figures | ({"truth": absent} if absent else {})
+
+
+def lit_by_truth(maps: dict[str, MapSet], truth_maps: dict[str, MapSet] | None) -> bool:
+    """Whether the objects were lit by the true environment's own maps (every map equal to the truth's): then the
+    truth frame is the frame and its FLIP is 0 by construction, not a result (e.g. `arsim render --env` of the
+    scenario's own environment)."""
+    if not truth_maps or set(maps) - set(truth_maps):
+        return False
+    return all(set(m.maps) <= set(truth_maps[name].maps) and
+               all(np.array_equal(a, truth_maps[name].maps[s]) for s, a in m.maps.items()) for name, m in maps.items())

@@ -181,6 +181,9 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                     mask[overlay_box] = False
                 flips[n] = score(truth_frame, out, mask) if mask.any() else np.nan
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
+                if k in saved:  # (shown beside the frame in the report)
+                    (out_dir / "frames" / "truth").mkdir(exist_ok=True)
+                    write_bytes_atomic(out_dir / "frames" / "truth" / f"{k:06d}.png", png_bytes(truth_frame))
                 if estimated and k in saved and mask.any():
                     lit = {name: _lit_frame(r, pose, time_s, frame, settings, overlay_box, out) for name, r in estimated.items()}
                     estimate_frames[int(k)] = {"truth_frame": truth_frame, "mask": mask, "lit": lit}

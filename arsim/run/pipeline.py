@@ -352,14 +352,15 @@ def _load_session(folder: Path) -> dict:
 
 
 def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | None = None,
-                 stage: Callable = quiet_stage, cache: StageCache | None = None) -> dict:
+                 stage: Callable = quiet_stage, cache: StageCache | None = None, baseline: dict | None = None) -> dict:
     """Run every stage into out, each reused from the cache where its key matches (README: The run cache);
-    returns the manifest (also written to out/manifest.json)."""
+    returns the manifest (also written to out/manifest.json). baseline: a baseline run's metrics.json, whose
+    figures the report shows beside the run's."""
     from arsim.capture.pipeline import CaptureSettings, recording_scenario
     from arsim.evaluate.diff import masked_flip
     from arsim.evaluate.estimates import estimate_summary, write_estimate_frames
     from arsim.evaluate.profile import ProfileRun, write_profile
-    from arsim.evaluate.session import session_metrics
+    from arsim.evaluate.session import lit_by_truth, session_metrics
     from arsim.lighting.bake_output import write_bake
     from arsim.lighting.mapset import MapSet
     from arsim.lighting.methods import MapParameters, bake
@@ -420,6 +421,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         return Captured(result.response, list(result.snapshots), filled_probe(result), metrics)
 
     keys = stage_keys(scenario, source, content, objects)
+    if baseline is not None:  # (the report shows its figures: another report)
+        keys["report"] = key_of("report", {"report": keys["report"], "baseline": baseline})
     captured, _ = stages.run("capture", keys["capture"], "2/6 capturing the light probe", make_capture, _save_captured,
                              _load_captured)
 
@@ -492,9 +495,13 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             if hit is None:
                 cache.store("tracking", tracked_as["key"], out, [], lambda folder: _save_tracked(session.tracked(), folder))
             (out / "profile").mkdir(exist_ok=True)
-            write_profile([ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)], out / "profile")
+            profiled = ProfileRun("AR session", r.method, scenario.profile.budget_ms, session.records)
+            write_profile([profiled], out / "profile")
             write_estimate_frames(session.estimate_frames, out / "estimates" / "frames")
             tracking, figures = session_metrics(ar, session)
+            figures |= {"budget_ms": profiled.budget_ms, "within_budget_pct": profiled.summary()["within_budget_pct"]}
+            if truth is not None and lit_by_truth(maps, baked["truth_maps"]):
+                figures["lit_by_truth"] = True  # (the FLIP is 0 by construction: the report says so)
         return {"frames": np.asarray(session.frames), "figures": figures, "estimate_scores": session.estimate_scores,
                 "tracking": TrackingFigures(tracking.found, tracking.rot_err_deg, tracking.trans_err_pct)}
 
@@ -512,7 +519,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     def make_report(description):
         with step("report", description):
             write_text_atomic(out / "metrics.json", json_text(metrics))
-            write_report(out, scenario, source, metrics, session["tracking"], session["frames"], maps)
+            write_report(out, scenario, source, metrics, session["tracking"], session["frames"], maps,
+                         baked["truth_maps"] if truth is not None else None, baseline)
 
     stages.run("report", keys["report"], "6/6 writing the report", make_report)
     for name, s in stages.record.items():

@@ -1,18 +1,26 @@
-"""The run's report: one self-contained HTML page (report/index.html, images embedded) with the scenario,
-the captured probe beside the truth, the maps per method, the chosen frames, the error tables, and the
-drift, tracking and frame-time plots."""
+"""The run's report: one self-contained HTML page (report/index.html, images embedded). It opens with the
+verdicts (a headline figure per stage against the scenario's [report] thresholds, evaluate.registry) and links to
+the run's other files; then the captured probe beside the truth, the maps beside the truth's and their error, the
+AR frames beside their truth frames and FLIP maps, every figure with its unit and meaning, and the drift,
+tracking and frame-time plots; the scenario last."""
 
 from __future__ import annotations
 
 import base64
 import html
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 
 from arsim.core.files import atomic_path, write_text_atomic
+from arsim.core.hdr_io import tonemap_preview
+from arsim.core.png import png_bytes, read_frame
 from arsim.evaluate.compare_methods import maps_grid
+from arsim.evaluate.diff import compare_images, magma
+from arsim.evaluate.metrics import relative_error
+from arsim.evaluate.registry import figures_of, label_of, metric_for, unit_text, verdicts, worse_beyond_tolerance
 from arsim.evaluate.tracking import TrackingRun
 from arsim.lighting.mapset import MapSet
 from arsim.scenario.loader import scenario_to_toml
@@ -33,8 +41,9 @@ def _num(value, digits: int = 3) -> str:
     return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
 
 
-def _table(header: list[str], rows: list[list]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+def _table(header: list[str], rows: list[list], escape: bool = True) -> str:
+    """rows' cells are HTML already (escape: the header is escaped)."""
+    head = "".join(f"<th>{html.escape(h) if escape else h}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
 
@@ -118,10 +127,128 @@ cubemap for reflections.</p>
 """
 
 
+PAGE_WIDTH = 1400  # pixels: the widest image the report embeds at full size
+
+
+def plot_maps_vs_truth(maps: MapSet, truth: MapSet, path: Path) -> None:
+    """Per exponent: the map from the captured probe, the truth's (both tone-mapped on one scale, so that they
+    compare), and the per-texel relative error (metrics.relative_error, mean over RGB, %) with a colour bar."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    exponents = [s for s in maps.exponents if s in truth.maps]
+    fig, axes = plt.subplots(3, len(exponents), figsize=(1.9 * len(exponents) + 1.2, 6.0), dpi=100, squeeze=False)
+    errors = []
+    for j, s in enumerate(exponents):
+        a, b = truth.maps[s], maps.maps[s]
+        inside = a.sum(axis=-1) > 0
+        both = tonemap_preview(np.concatenate([b, a], axis=1))
+        n = a.shape[1]
+        err = np.full(a.shape[:2], np.nan)
+        err[inside] = 100 * relative_error(a[inside], b[inside]).mean(axis=-1)
+        errors.append(err)
+        for i, (image, label) in enumerate(((both[:, :n], "captured"), (both[:, n:], "truth"))):
+            axes[i, j].imshow(image)
+            if j == 0:
+                axes[i, j].set_ylabel(label, fontsize=9)
+        axes[0, j].set_title("irradiance" if s == 1 else f"s = {s:g}", fontsize=9)
+    top = max(1.0, float(np.nanpercentile(np.concatenate([e[np.isfinite(e)] for e in errors]), 99)))
+    for j, err in enumerate(errors):
+        shown = axes[2, j].imshow(err, cmap="magma", vmin=0.0, vmax=top)
+        axes[2, j].set_xlabel(f"mean {np.nanmean(err):.2f} %", fontsize=8)
+    axes[2, 0].set_ylabel("error", fontsize=9)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.colorbar(shown, ax=axes[2, :].tolist(), fraction=0.02, pad=0.01, label="relative error (%)")
+    fig.suptitle(f"{maps.method} maps from the captured probe against the true environment's (error: the colour "
+                 "bar's top is the 99th percentile)", fontsize=10)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    plt.close(fig)
+
+
+def frame_vs_truth(frame: Path, truth: Path, path: Path) -> float | None:
+    """The frame, its truth frame and the FLIP map between them side by side (magma, with a colour bar drawn
+    beside it); returns the FLIP mean over the pixels that differ (None: the frames are equal)."""
+    import cv2
+
+    a, b = read_frame(truth), read_frame(frame)
+    diff, error = compare_images(a, b, frame.name)
+    heat = magma(error if error is not None else np.zeros(a.shape[:2], np.float32))
+    bar = np.repeat(magma(np.linspace(1, 0, a.shape[0])[:, None].astype(np.float32)), 12, axis=1)
+    labels = np.concatenate([bar, np.full((a.shape[0], 34, 3), 255, np.uint8)], axis=1)
+    for value, y in ((1.0, 12), (0.5, a.shape[0] // 2), (0.0, a.shape[0] - 4)):
+        cv2.putText(labels, f"{value:g}", (14, y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    gap = np.full((a.shape[0], 6, 3), 255, np.uint8)
+    write = np.concatenate([b, gap, a, gap, heat, gap, labels], axis=1)
+    if write.shape[1] > PAGE_WIDTH:  # (sized for the page: the report embeds it)
+        write = cv2.resize(write, (PAGE_WIDTH, round(write.shape[0] * PAGE_WIDTH / write.shape[1])), interpolation=cv2.INTER_AREA)
+    with atomic_path(path) as tmp:
+        Path(tmp).write_bytes(png_bytes(write))
+    return diff.flip_mean if error is not None else None
+
+
+def _verdict_section(metrics: dict, scenario: Scenario, baseline: dict | None) -> str:
+    """The verdict table: per stage its headline figure, unit, what it measures, the thresholds and pass/warn/fail;
+    with a baseline run's metrics, its value and the change beside."""
+    rows = []
+    for v in verdicts(metrics, scenario.render.method, scenario.report):
+        status = v.status
+        value = unit_text(v.metric, v.value) if v.value is not None else "n/a"
+        cells = [html.escape(v.stage), f'<span class="{status.replace("/", "")}">{status}</span>', html.escape(value),
+                 html.escape(v.metric.label) + f'<br><small>{html.escape(v.metric.meaning)}'
+                 + (f"; {html.escape(v.note)}" if v.note else "") + "</small>", html.escape(v.threshold_text())]
+        if baseline is not None:
+            b = next((x for x in verdicts(baseline, scenario.render.method, scenario.report) if x.metric == v.metric), None)
+            if b is None or b.value is None or v.value is None:
+                cells += ["n/a", ""]
+            else:
+                worse = worse_beyond_tolerance(v.metric, b.value, v.value)
+                cells += [html.escape(unit_text(v.metric, b.value)),
+                          f'<span class="{"fail" if worse else ""}">{v.value - b.value:+.4g}{" (worse)" if worse else ""}</span>']
+        rows.append(cells)
+    header = ["stage", "verdict", "value", "figure", "thresholds ([report])"] + (["baseline", "change"] if baseline is not None else [])
+    counts = {k: sum(r[1].count(f">{k}<") for r in rows) for k in ("pass", "warn", "fail", "n/a")}
+    overall = "fail" if counts["fail"] else "warn" if counts["warn"] else "pass"
+    return (f'<h2 id="summary">Summary: <span class="{overall}">{overall}</span></h2>'
+            f"<p>{counts['pass']} pass, {counts['warn']} warn, {counts['fail']} fail, {counts['n/a']} not judged. Thresholds "
+            "come from the scenario's <code>[report]</code> section (README: Reading a run); each figure is defined "
+            "in the tables below.</p>" + _table(header, rows, escape=False))
+
+
+def _figures_table(metrics: dict, prefix: str, skip: tuple[str, ...] = ()) -> str:
+    """Every figure under prefix with its label, value and unit, and meaning (evaluate.registry); its key small."""
+    rows = []
+    for path, value in figures_of({prefix: metrics.get(prefix, {})}).items():
+        if any(path.startswith(f"{prefix}.{k}") for k in skip):
+            continue
+        m = metric_for(path)
+        rows.append([html.escape(label_of(path)), html.escape(unit_text(m, value)),
+                     html.escape(m.meaning if m else ""), f"<small><code>{html.escape(path)}</code></small>"])
+    return _table(["figure", "value", "what it measures", "key in metrics.json"], rows, escape=False)
+
+
+def _links(out: Path) -> str:
+    names = [("session.mp4", "the AR session's video"), ("profile/profile.md", "frame-time profile"),
+             ("profile/trace.json", "trace (chrome://tracing, Perfetto)"), ("metrics.json", "every figure"),
+             ("manifest.json", "files, stages, versions"), ("scenario.toml", "the scenario as run")]
+    return "<p class=\"links\">" + " · ".join(f'<a href="../{n}">{html.escape(label)}</a>' for n, label in names
+                                             if (out / n).is_file() or n == "manifest.json") + "</p>"
+
+
+def _shown_toml(scenario: Scenario) -> str:
+    """The scenario's TOML with absolute paths shortened to their names (the run's scenario.toml has them whole)."""
+    return re.sub(r'"(/[^"]*/)([^"/]+)"', r'".../\2"', scenario_to_toml(scenario))
+
+
 def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, tracking: TrackingRun, frames: np.ndarray,
-                 maps: dict[str, MapSet]) -> Path:
+                 maps: dict[str, MapSet], truth_maps: dict[str, MapSet] | None = None, baseline: dict | None = None) -> Path:
     """report/index.html. Where the recording lacks a truth (metrics["truth"]), each section that needs it says
-    what it leaves out and why instead."""
+    what it leaves out and why instead. truth_maps: the true environment's maps (shown beside the maps); baseline:
+    a baseline run's metrics.json (its figures beside this run's in the summary)."""
     report = out / "report"
     report.mkdir(exist_ok=True)
     absent = metrics.get("truth", {})
@@ -129,73 +256,89 @@ def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, trac
     exponents = next(iter(maps.values())).exponents
     maps_grid({name: np.stack([m[s] for s in exponents]) for name, m in maps.items()}, exponents, report / "maps.png",
               "Irradiance (s = 1) and reflection maps baked from the captured probe")
+    method = scenario.render.method
+    if truth_maps and method in truth_maps and method in maps:
+        plot_maps_vs_truth(maps[method], truth_maps[method], report / "maps_vs_truth.png")
     if tracking.measured:
         plot_tracking(tracking, frames, report / "tracking.png")
-    c, s = metrics["capture"], metrics["session"]
-    capture_rows = [[html.escape(k), html.escape(_num(v)) if not isinstance(v, list) else html.escape("; ".join(map(str, v)) or "none")]
-                    for k, v in c.items() if not isinstance(v, dict)]
-    map_rows = []
-    for name, m in metrics["maps"].items():
-        for exp, e in m.get("per_exponent", {}).items():
-            map_rows.append([name, "irradiance" if exp == "1" else f"s = {exp}", _num(e["error_vs_truth_same_method_pct"], 2),
-                             _num(e["error_vs_truth_accurate_pct"], 2), _num(e["method_error_on_truth_pct"], 2)])
-    session_rows = [[k, _num(s.get(k))] for k in ("frames_total", "frames_lost", "frames_tag_visible", "detection_rate_visible",
-                                                  "tracking_rot_err_deg_p95", "tracking_trans_err_pct_p95",
-                                                  "tracking_trans_err_mm_p95", "flip_mean") if k in s]
-    frames = sorted((out / "frames").glob("*.png"))
+    s = metrics["session"]
+    by_construction = bool(s.get("lit_by_truth"))
+    shown = sorted((out / "frames").glob("*.png"))
     flip_of = dict(zip((int(k) for k in s["frames_rendered"]), s.get("flip_per_frame", [])))
-    figures = "".join(f"<figure>{_img(f, f.name, 420)}<figcaption>frame {int(f.stem)}"
-                      + ("" if no_scene else ": FLIP " + (f"{_num(flip_of.get(int(f.stem)), 4)}" if flip_of.get(int(f.stem)) is not None
-                                                         else "n/a (no object drawn)"))
-                      + "</figcaption></figure>" for f in frames)
+    figures = []
+    for f in shown:
+        truth_frame = out / "frames" / "truth" / f.name
+        flip = flip_of.get(int(f.stem))
+        caption = f"frame {int(f.stem)}"
+        if not no_scene:
+            caption += ": FLIP " + (_num(flip, 4) if flip is not None else "n/a (no object drawn)")
+        if truth_frame.is_file():
+            frame_vs_truth(f, truth_frame, report / f"frame_{f.stem}.png")
+            figures.append(f"<figure>{_img(report / f'frame_{f.stem}.png', f.name, 1100)}<figcaption>{caption}; "
+                           "left to right: the frame, its truth frame, the FLIP map (0 black, 1 yellow)</figcaption></figure>")
+        else:
+            figures.append(f"<figure>{_img(f, f.name, 420)}<figcaption>{caption}</figcaption></figure>")
     lost = s.get("frames_lost", 0)
     estimates = _estimates_section(out, metrics.get("estimates", {}), no_scene)
     scored = ("the frames are not scored: " + html.escape(_why(no_scene)) if no_scene else
-              f"FLIP against the truth frame: {_num(s.get('flip_mean'), 4)}, the mean over {s.get('flip_frames')} frames "
+              f"FLIP against the truth frame {_num(s.get('flip_mean'), 4)}, the mean over {s.get('flip_frames')} frames "
               f"({'every' if scenario.render.flip_every == 1 else f'every {scenario.render.flip_every}th'} frame with "
-              "objects, and the frames shown)")
+              "objects, and the frames shown), over the objects' mask, the truth frame drawn at the tracked pose: it "
+              "measures the light, not the tracking"
+              + (" (<b>0 by construction here</b>: the objects were lit by the true environment's own maps)" if by_construction else ""))
     if no_scene:
         probe = f"""<h2 id="capture">Captured probe</h2>{_absent("the true environment beside it (" + _why(no_scene) + ")")}
 {_img(out / 'capture' / 'probe.png', 'captured probe', 500)}"""
     else:
         probe = f"""<h2 id="capture">Captured probe and the truth</h2>{_img(out / 'capture' / 'probe_vs_truth.png', 'probe vs truth', 1100)}"""
+    map_rows = []
+    for name, m in metrics["maps"].items():
+        for exp, e in m.get("per_exponent", {}).items():
+            map_rows.append([name, "irradiance" if exp == "1" else f"s = {exp}", _num(e["error_vs_truth_same_method_pct"], 2),
+                             _num(e["error_vs_truth_accurate_pct"], 2), _num(e["method_error_on_truth_pct"], 2)])
     if no_scene:
         maps_table = _absent("the maps' errors (" + _why(no_scene) + ")")
     else:
-        maps_table = f"""<p>Against the same method on the true environment (what the capture costs), against the true environment's accurate
-maps (capture and method together), and the method's own error on the true environment. Accurate and bounds maps are
-baked on the GL path (float32, held to the NumPy float64 sums within 1e-3 by the tests).</p>
-{_table(['method', 'map', 'vs truth, same method', 'vs truth, accurate', 'method on truth'], map_rows)}"""
+        maps_table = f"""<p>Mean relative error per texel, %: against the same method on the true environment (what the capture
+costs), against the true environment's exact (accurate) maps (capture and method together), and the method's own
+error on the true environment. Accurate and bounds maps are baked on the GL path (float32, held to the NumPy float64
+sums within 1e-3 by the tests).</p>
+{_table(['method', 'map', 'vs truth, same method (%)', 'vs truth, accurate (%)', 'method on truth (%)'], map_rows)}
+{_img(report / 'maps_vs_truth.png', 'maps against the truth', 1100) if (report / 'maps_vs_truth.png').is_file() else ''}"""
     truth_note = "".join(f"<li>{html.escape(_why(why))}</li>" for why in absent.values())
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>arsim run: {html.escape(scenario.run.name)}</title>
-<style>body{{font-family:sans-serif;margin:2em;max-width:1200px}} table{{border-collapse:collapse;margin:0.5em 0}}
-td,th{{border:1px solid #ccc;padding:2px 8px}} td{{text-align:right}} td:first-child{{text-align:left}}
-.row{{display:flex;gap:8px;flex-wrap:wrap}} figure{{margin:0}} pre{{background:#f4f4f4;padding:8px;max-height:300px;overflow:auto}}
-nav a{{margin-right:1em}} .absent{{color:#8a5a00}}</style></head>
+<style>body{{font-family:sans-serif;margin:1.5em 2em;max-width:1200px}} table{{border-collapse:collapse;margin:0.5em 0}}
+td,th{{border:1px solid #ccc;padding:2px 8px;vertical-align:top}} td{{text-align:right}} td:first-child{{text-align:left}}
+td small{{color:#555}} .row{{display:flex;gap:8px;flex-wrap:wrap}} figure{{margin:0 0 0.8em 0}} img{{max-width:100%}}
+pre{{background:#f4f4f4;padding:8px;max-height:300px;overflow:auto}} nav a{{margin-right:1em}} .absent{{color:#8a5a00}}
+.pass{{color:#fff;background:#2a7d2a;padding:0 6px;border-radius:3px}} .warn{{color:#000;background:#f0c000;padding:0 6px;border-radius:3px}}
+.fail{{color:#fff;background:#c0392b;padding:0 6px;border-radius:3px}} .na{{color:#555}} .links a{{margin-right:0.3em}}</style></head>
 <body><h1>arsim run: {html.escape(scenario.run.name)}</h1>
 <p>Scenario {html.escape(source)}, seed {scenario.run.seed}. The AR session rendered {s['frames_total']} frames; the tag was
 lost in {lost} of them (no object drawn there); {scored}.</p>
+{_verdict_section(metrics, scenario, baseline)}
+{_links(out)}
 {f'<p class="absent">The recording lacks a truth; what needs it is left out:</p><ul class="absent">{truth_note}</ul>' if absent else ''}
-<nav><a href="#scenario">scenario</a><a href="#capture">capture</a><a href="#estimates">light estimates</a><a href="#maps">maps</a><a href="#frames">frames</a>
-<a href="#errors">errors</a><a href="#plots">drift, tracking, frame time</a></nav>
-<h2 id="scenario">Scenario</h2><pre>{html.escape(scenario_to_toml(scenario))}</pre>
+<nav><a href="#capture">capture</a><a href="#estimates">light estimates</a><a href="#maps">maps</a><a href="#frames">frames</a>
+<a href="#figures">every figure</a><a href="#plots">drift, tracking, frame time</a><a href="#scenario">scenario</a></nav>
 {probe}
 {_img(out / 'capture' / 'coverage.png', 'coverage', 500)}
 {estimates}
-<h2 id="maps">Maps per method</h2><p>Baked from the captured probe (maps/&lt;method&gt;/), each shown by Reinhard's operator.</p>
+<h2 id="maps">Maps</h2><p>Baked from the captured probe (maps/&lt;method&gt;/), each shown by Reinhard's operator.</p>
 {_img(report / 'maps.png', 'maps', 1100)}
-<h2 id="frames">Frames</h2><div class="row">{figures}</div>
-<h2 id="errors">Errors</h2>
-<h3>Capture</h3>{''.join(_absent(why) for why in absent.values())}{_table(['metric', 'value'], capture_rows)}
-<h3>Maps (mean relative error, %)</h3>
 {maps_table}
-<h3>AR session</h3>{''.join(_absent(why) for why in absent.values())}{_table(['metric', 'value'], session_rows)}
+<h2 id="frames">AR frames</h2><p>{scored}.</p>{''.join(figures)}
+<h2 id="figures">Every figure</h2>
+<h3>Capture</h3>{''.join(_absent(why) for why in absent.values())}{_figures_table(metrics, 'capture')}
+<h3>AR session</h3>{''.join(_absent(why) for why in absent.values())}{_figures_table(metrics, 'session', ('flip_per_frame',))}
 <h2 id="plots">Drift, tracking and frame time</h2>
 <h3>IMU drift and its correction</h3>{_absent("the drift against the truth (" + _why(no_poses) + "); shown: how far the capture turned the IMU's orientations") if no_poses else ''}
 {_img(out / 'capture' / 'drift.png', 'drift', 900)}
 <h3>Tracking</h3>{_absent("the tracking's errors (" + _why(no_poses) + ")") if no_poses else _img(report / 'tracking.png', 'tracking', 900)}
 <h3>Frame time</h3>{_img(out / 'profile' / 'timeline.png', 'frame time', 1000)}
+<h2 id="scenario">Scenario</h2><details><summary>the scenario as run (absolute paths shortened; scenario.toml has them)</summary>
+<pre>{html.escape(_shown_toml(scenario))}</pre></details>
 </body></html>
 """
     write_text_atomic(report / "index.html", page)

@@ -27,7 +27,7 @@ from arsim.evaluate.capture_report import write_capture
 from arsim.evaluate.diff import masked_flip
 from arsim.evaluate.profile import ProfileRun, write_profile
 from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
-from arsim.evaluate.session import session_metrics
+from arsim.evaluate.session import lit_by_truth, session_metrics
 from arsim.render.baking import BakeSettings
 from arsim.render.content import light_objects, scene_objects
 from arsim.render.session import SessionSettings, check_maps, maps_needed, run_profile, run_session, session_maps
@@ -267,6 +267,8 @@ def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map
                               progress=lambda f: update(completed=f))
     metrics = session_metrics(ar, session)[1] | {"method": settings.method, "methods": needed, "map_size": map_size,
                                                  "log_average": settings.log_average, "probe": source}
+    if truth_maps is not None and lit_by_truth(maps, truth_maps):
+        metrics["lit_by_truth"] = True  # (the FLIP is 0 by construction, not a result)
     write_text_atomic(out / "metrics.json", json_text(metrics))
     return metrics
 

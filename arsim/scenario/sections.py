@@ -310,6 +310,46 @@ class ProfileSection:
                               help="stop after this many frames even if the bake is not complete")
 
 
+def _thresholds(higher_is_better: bool = False):
+    """check of a [report] threshold pair: (warn, fail), fail beyond warn."""
+    def check(value):
+        warn, fail = value
+        if (fail < warn) if not higher_is_better else (fail > warn):
+            return (f"(warn, fail) = ({warn:g}, {fail:g}): fail must be {'at least' if not higher_is_better else 'at most'} "
+                    f"warn, e.g. ({warn:g}, {warn * (2 if not higher_is_better else 0.5):g})")
+        return None
+    return check
+
+
+@dataclass(frozen=True)
+class ReportSection:
+    """[report]: the thresholds of the report's verdicts (README: Reading a run), each a pair (warn, fail): a
+    headline figure worse than warn warns, worse than fail fails."""
+
+    capture_orientation_deg: tuple[float, float] = setting(
+        (0.25, 1.0), min=0.0, max=180.0, unit="degrees", check=_thresholds(),
+        help="capture: RMS camera orientation error after drift correction")
+    capture_irradiance_pct: tuple[float, float] = setting(
+        (1.0, 5.0), min=0.0, max=1000.0, unit="%", check=_thresholds(),
+        help="capture: mean error of the irradiance map from the captured probe")
+    maps_error_pct: tuple[float, float] = setting(
+        (2.0, 10.0), min=0.0, max=1000.0, unit="%", check=_thresholds(),
+        help="maps: mean error of [render] method's maps against the true environment's exact maps, worst exponent")
+    tracking_rotation_deg: tuple[float, float] = setting(
+        (0.5, 2.0), min=0.0, max=180.0, unit="degrees", check=_thresholds(),
+        help="tracking: the tag's rotation error, 95th percentile over the frames with the tag in view")
+    tracking_position_pct: tuple[float, float] = setting(
+        (1.0, 3.0), min=0.0, max=1000.0, unit="% of distance", check=_thresholds(),
+        help="tracking: the tag's position error, 95th percentile")
+    ar_flip: tuple[float, float] = setting(
+        (0.05, 0.15), min=0.0, max=1.0, check=_thresholds(),
+        help="AR frames: mean FLIP of the objects against the truth frame over their mask")
+    within_budget_pct: tuple[float, float] = setting(
+        (95.0, 80.0), min=0.0, max=100.0, unit="%", check=_thresholds(higher_is_better=True),
+        help="frame budget: share of frames whose steps 3-7 fit [profile] budget_ms (higher is better: warn below "
+             "the first, fail below the second)")
+
+
 @dataclass(frozen=True)
 class Scenario:
     """A whole scenario: one field per TOML section, each a checked, frozen dataclass."""
@@ -321,3 +361,4 @@ class Scenario:
     ar: ArSection = subsection(ArSection, help="the AR session's path, tag and table")
     render: RenderSection = subsection(RenderSection, help="the AR session's renderer and virtual objects")
     profile: ProfileSection = subsection(ProfileSection, help="the render loop's profile while baking")
+    report: ReportSection = subsection(ReportSection, help="the report's verdict thresholds")
