@@ -25,19 +25,26 @@ from pathlib import Path
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
 from arsim.evaluate.diff import check_max_flip
+from arsim.evaluate.registry import metric_for
 from arsim.scenario.loader import scenario_path
 
-# (key in the run's metrics, column title, digits)
+# The figures a batch's summary shows (keys in the runs' metrics.json, digits); their titles and units come from
+# the registry of figures (evaluate.registry), as the report's and diff's do.
 COLUMNS = (
-    ("session.frames_total", "frames", 0),
-    ("session.frames_lost", "tag lost", 0),
-    ("session.tracking_rot_err_deg_p95", "rotation p95 (°)", 3),
-    ("session.tracking_trans_err_pct_p95", "position p95 (%)", 3),
-    ("session.flip_mean", "FLIP vs truth", 4),
-    ("capture.coverage_pct", "coverage (%)", 2),
-    ("capture.orientation_rms_deg_corrected", "orientation RMS (°)", 3),
-    ("capture.irradiance_mean_err_pct", "irradiance error (%)", 2),
+    ("session.frames_total", 0),
+    ("session.frames_lost", 0),
+    ("session.tracking_rot_err_deg_p95", 3),
+    ("session.tracking_trans_err_pct_p95", 3),
+    ("session.flip_mean", 4),
+    ("capture.coverage_pct", 2),
+    ("capture.orientation_rms_deg_corrected", 3),
+    ("capture.irradiance_mean_err_pct", 2),
 )
+
+
+def column_title(key: str) -> str:
+    m = metric_for(key)
+    return f"{m.label} ({m.unit})" if m.unit else m.label
 
 
 def _get(metrics: dict, dotted: str):
@@ -173,14 +180,14 @@ def _cell(value, digits: int) -> str:
 
 
 def _rows(summary: dict) -> tuple[list[str], list[list[str]]]:
-    header = ["scenario", "status"] + [title for _, title, _ in COLUMNS] + ["against baseline"]
+    header = ["scenario", "status"] + [column_title(key) for key, _ in COLUMNS] + ["against baseline"]
     rows = []
     for s in summary["scenarios"]:
         status = "ok" if s["ok"] else f"failed: {s['error']}"
         reg = s.get("regression")
         against = "n/a" if reg is None else ("passed" if reg["passed"] else
                                               f"REGRESSION: FLIP {reg['flip_max']:.5f} ({reg['worst_frame']})")
-        rows.append([s["name"], status] + [_cell(_get(s.get("metrics", {}), key), d) for key, _, d in COLUMNS] + [against])
+        rows.append([s["name"], status] + [_cell(_get(s.get("metrics", {}), key), d) for key, d in COLUMNS] + [against])
     return header, rows
 
 

@@ -41,11 +41,11 @@ def _num(value, digits: int = 3) -> str:
     return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
 
 
-def _table(header: list[str], rows: list[list], escape: bool = True) -> str:
+def _table(header: list[str], rows: list[list], escape: bool = True, cls: str = "") -> str:
     """rows' cells are HTML already (escape: the header is escaped)."""
     head = "".join(f"<th>{html.escape(h) if escape else h}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
+    return f"<table{f' class={chr(34)}{cls}{chr(34)}' if cls else ''}><tr>{head}</tr>{body}</table>"
 
 
 def plot_tracking(t: TrackingRun, frames: np.ndarray, path: Path) -> None:
@@ -172,16 +172,21 @@ def plot_maps_vs_truth(maps: MapSet, truth: MapSet, path: Path) -> None:
 
 def frame_vs_truth(frame: Path, truth: Path, path: Path) -> float | None:
     """The frame, its truth frame and the FLIP map between them side by side (magma, with a colour bar drawn
-    beside it); returns the FLIP mean over the pixels that differ (None: the frames are equal)."""
+    beside it, its top written on it); returns the FLIP mean over the frame (None: the frames are equal)."""
     import cv2
 
     a, b = read_frame(truth), read_frame(frame)
     diff, error = compare_images(a, b, frame.name)
-    heat = magma(error if error is not None else np.zeros(a.shape[:2], np.float32))
+    error = error if error is not None else np.zeros(a.shape[:2], np.float32)
+    # FLIP's range is 0-1, but the objects' errors are often a few hundredths: the scale's top is the larger of
+    # 0.05 and the 99.9th percentile of the pixels that differ, written on the colour bar
+    differs = error > 0
+    top = max(0.05, float(np.percentile(error[differs], 99.9))) if differs.any() else 1.0
+    heat = magma(error / top)
     bar = np.repeat(magma(np.linspace(1, 0, a.shape[0])[:, None].astype(np.float32)), 12, axis=1)
-    labels = np.concatenate([bar, np.full((a.shape[0], 34, 3), 255, np.uint8)], axis=1)
-    for value, y in ((1.0, 12), (0.5, a.shape[0] // 2), (0.0, a.shape[0] - 4)):
-        cv2.putText(labels, f"{value:g}", (14, y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    labels = np.concatenate([bar, np.full((a.shape[0], 40, 3), 255, np.uint8)], axis=1)
+    for value, y in ((top, 12), (top / 2, a.shape[0] // 2), (0.0, a.shape[0] - 4)):
+        cv2.putText(labels, f"{value:.2g}", (14, y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
     gap = np.full((a.shape[0], 6, 3), 255, np.uint8)
     write = np.concatenate([b, gap, a, gap, heat, gap, labels], axis=1)
     if write.shape[1] > PAGE_WIDTH:  # (sized for the page: the report embeds it)
@@ -216,7 +221,7 @@ def _verdict_section(metrics: dict, scenario: Scenario, baseline: dict | None) -
     return (f'<h2 id="summary">Summary: <span class="{overall}">{overall}</span></h2>'
             f"<p>{counts['pass']} pass, {counts['warn']} warn, {counts['fail']} fail, {counts['n/a']} not judged. Thresholds "
             "come from the scenario's <code>[report]</code> section (README: Reading a run); each figure is defined "
-            "in the tables below.</p>" + _table(header, rows, escape=False))
+            "in the tables below.</p>" + _table(header, rows, escape=False, cls="verdicts"))
 
 
 def _figures_table(metrics: dict, prefix: str, skip: tuple[str, ...] = ()) -> str:
@@ -228,7 +233,7 @@ def _figures_table(metrics: dict, prefix: str, skip: tuple[str, ...] = ()) -> st
         m = metric_for(path)
         rows.append([html.escape(label_of(path)), html.escape(unit_text(m, value)),
                      html.escape(m.meaning if m else ""), f"<small><code>{html.escape(path)}</code></small>"])
-    return _table(["figure", "value", "what it measures", "key in metrics.json"], rows, escape=False)
+    return _table(["figure", "value", "what it measures", "key in metrics.json"], rows, escape=False, cls="figures")
 
 
 def _links(out: Path) -> str:
@@ -275,7 +280,8 @@ def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, trac
         if truth_frame.is_file():
             frame_vs_truth(f, truth_frame, report / f"frame_{f.stem}.png")
             figures.append(f"<figure>{_img(report / f'frame_{f.stem}.png', f.name, 1100)}<figcaption>{caption}; "
-                           "left to right: the frame, its truth frame, the FLIP map (0 black, 1 yellow)</figcaption></figure>")
+                           "left to right: the frame, its truth frame, the FLIP map (magma, black 0; the colour bar's top is written "
+                           "on it)</figcaption></figure>")
         else:
             figures.append(f"<figure>{_img(f, f.name, 420)}<figcaption>{caption}</figcaption></figure>")
     lost = s.get("frames_lost", 0)
@@ -313,7 +319,8 @@ td,th{{border:1px solid #ccc;padding:2px 8px;vertical-align:top}} td{{text-align
 td small{{color:#555}} .row{{display:flex;gap:8px;flex-wrap:wrap}} figure{{margin:0 0 0.8em 0}} img{{max-width:100%}}
 pre{{background:#f4f4f4;padding:8px;max-height:300px;overflow:auto}} nav a{{margin-right:1em}} .absent{{color:#8a5a00}}
 .pass{{color:#fff;background:#2a7d2a;padding:0 6px;border-radius:3px}} .warn{{color:#000;background:#f0c000;padding:0 6px;border-radius:3px}}
-.fail{{color:#fff;background:#c0392b;padding:0 6px;border-radius:3px}} .na{{color:#555}} .links a{{margin-right:0.3em}}</style></head>
+.fail{{color:#fff;background:#c0392b;padding:0 6px;border-radius:3px}} .na{{color:#555}} .links a{{margin-right:0.3em}}
+table.verdicts td:nth-child(4), table.figures td:nth-child(3), table.figures td:nth-child(4){{text-align:left}}</style></head>
 <body><h1>arsim run: {html.escape(scenario.run.name)}</h1>
 <p>Scenario {html.escape(source)}, seed {scenario.run.seed}. The AR session rendered {s['frames_total']} frames; the tag was
 lost in {lost} of them (no object drawn there); {scored}.</p>
