@@ -145,3 +145,16 @@ def test_the_loop_baker_drops_its_invalid_readings(readings, expected):
     assert (baker.last_gl_ms, baker.last_gl_dropped) == expected
     assert baker.gl_ms_total == (expected[0] or 0.0)
     baker.release()
+
+
+def test_a_reading_under_a_microsecond_is_not_shown_as_zero():
+    """llvmpipe's readings of a pass it rasterises outside the query can be ~20 ns: valid (not 0), and shown so."""
+    loop = FrameLoop(FakeContext([20, 21, 19]), None, None)
+    loop.origin = 0.0
+    records = []
+    for k in range(3):
+        records.append(FrameRecord(k, 40.0 * k))
+        loop._timed(records[-1], "background", lambda: None)
+    row = next(line for line in markdown([ProfileRun("8", "accurate", 33.3, records)]).splitlines()
+               if line.startswith("| background |"))
+    assert row.split(" | ")[5:9] == ["2.0e-05", "2.1e-05", "2.1e-05", "2.1e-05"] and "0.000" not in row

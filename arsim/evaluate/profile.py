@@ -129,6 +129,11 @@ class ProfileRun:
         return {"traceEvents": events, "displayTimeUnit": "ms"}
 
 
+def _gl_cell(ms: float) -> str:
+    """A GL time in the table: below 1 µs in two significant digits (a reading of 20 ns is not one of 0)."""
+    return f"{ms:.3f}" if ms >= 0.001 else f"{ms:.1e}"
+
+
 def markdown(runs: list[ProfileRun]) -> str:
     """profile.md: per run the budget, the misses, the bake, and per step p50/p95/p99/max (CPU and GL)."""
     lines = ["# Render-loop profile", ""]
@@ -158,7 +163,7 @@ def markdown(runs: list[ProfileRun]) -> str:
                 continue
             cells = [f"{cpu[k]:.3f}" for k in ("p50", "p95", "p99", "max")]
             # n/a: the step was timed on the GL but no reading was a time
-            cells += [f"{gl[k]:.3f}" for k in ("p50", "p95", "p99", "max")] if gl else ["n/a"] * 4 if name in dropped else [""] * 4
+            cells += [_gl_cell(gl[k]) for k in ("p50", "p95", "p99", "max")] if gl else ["n/a"] * 4 if name in dropped else [""] * 4
             lines.append(f"| {name} | " + " | ".join(cells) + f" | {cpu['frames']} |")
         valid = {name: v["gl"].get("frames", 0) for name, v in s["steps"].items()}
         lines += ["", "Milliseconds. The frame is the render thread's steps 3-7; `track` (the tag tracker) runs on the "
