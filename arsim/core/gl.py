@@ -33,9 +33,8 @@ def create_gl_context(require: int = REQUIRED_GL_VERSION):
 
 # A GL timer query's reading (moderngl's Query.elapsed: nanoseconds, read as a 32-bit unsigned integer) is a
 # time only where it is positive and below 2^32 - 1: the driver clamps a result that does not fit (an interval
-# over 4.29 s, or a negative one from a clock that stepped back) to 2^32 - 1; and 0 ns is no GPU work's
-# time (a query that timed nothing). Such readings are dropped and counted,
-# never reported as times.
+# over 4.29 s, or a negative one from a clock that stepped back) to 2^32 - 1, and 0 ns is no GPU work's time
+# (a query that timed nothing). The others are dropped and counted, never reported as times.
 TIMER_CLAMPED_NS = 2**32 - 1
 TIMER_DROPPED = {
     "zero": "0 ns (the query timed nothing)",
