@@ -37,10 +37,10 @@ def create_gl_context(require: int = REQUIRED_GL_VERSION):
 # (a query that timed nothing). The others are dropped and counted, never reported as times.
 TIMER_CLAMPED_NS = 2**32 - 1
 TIMER_DROPPED = {
-    "zero": "0 ns (the query timed nothing)",
-    "clamped": "2^32 - 1 ns or more (a result that did not fit, clamped)",
+    "zero": "0 ns, a query that timed nothing",
+    "clamped": "2^32 - 1 ns or more, a result that did not fit in 32 bits",
     "negative": "below 0 ns",
-    "unavailable": "no reading (the query could not be read, or not as a number)",
+    "unavailable": "a query that could not be read, or not as a number",
 }
 
 

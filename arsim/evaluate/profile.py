@@ -168,8 +168,8 @@ def markdown(runs: list[ProfileRun]) -> str:
         valid = {name: v["gl"].get("frames", 0) for name, v in s["steps"].items()}
         lines += ["", "Milliseconds. The frame is the render thread's steps 3-7; `track` (the tag tracker) runs on the "
                   "camera's thread, outside the budget. GL: the timer queries' readings that are times; "
-                  + ("dropped as no time: " + dropped_text(dropped, valid) + " ("
-                     + "; ".join(f"{why}: {text}" for why, text in s["gl_dropped_why"].items()) + ")."
+                  + ("dropped as no time: " + dropped_text(dropped, valid) + "; "
+                     + "; ".join(f"{why}: {text}" for why, text in s["gl_dropped_why"].items()) + "."
                      if dropped else "none dropped (every reading was a time)."), ""]
     if len(runs) > 1:
         lines += ["## Sweep (as the thesis's table 6.6)", "", sweep_table(runs), ""]
