@@ -128,3 +128,33 @@ def test_a_bad_progress_setting_is_refused_in_one_line(tmp_path):
     env = os.environ | {"ARSIM_PROGRESS": "loud"}
     assert_one_line_error(arsim("capture", tmp_path / "none.toml", "-o", tmp_path / "out", env=env), "ARSIM_PROGRESS")
     assert not (tmp_path / "out").exists()
+
+
+def test_batch_logs_a_line_per_finished_run(tmp_path):
+    """`arsim batch` with stderr not a terminal: a line per run as it finishes (here two runs that crash at once:
+    a startup hook makes run_scenario raise), and the runs' own errors still what the summary names."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(
+        "import arsim.run.pipeline as p\n"
+        "def boom(scenario, source, *a, **k):\n"
+        "    raise RuntimeError('simulated crash')\n"
+        "p.run_scenario = boom\n")
+    for name in ("alpha", "beta"):
+        (tmp_path / f"{name}.toml").write_text(f'[run]\nname = "{name}"\n')
+    root = Path(__file__).resolve().parents[1]
+    env = os.environ | {"ARSIM_PROGRESS": "auto",
+                        "PYTHONPATH": os.pathsep.join([str(hook), str(root), os.environ.get("PYTHONPATH", "")])}
+    r = subprocess.run([sys.executable, "-m", "arsim", "batch", str(tmp_path / "alpha.toml"), str(tmp_path / "beta.toml"),
+                        "-o", str(tmp_path / "out"), "--workers", "2"], capture_output=True, text=True, env=env)
+    assert r.returncode == 1, r.stderr
+    log = [line for line in r.stderr.splitlines() if line.startswith("[arsim]")]
+    assert log[0] == "[arsim] running 2 scenarios: started"
+    assert re.fullmatch(r"\[arsim\] running 2 scenarios: 50 % \(\d+\.\d s\), (alpha|beta) failed", log[1]), log
+    assert re.fullmatch(r"\[arsim\] running 2 scenarios: 100 % \(\d+\.\d s\), (alpha|beta) failed", log[2]), log
+    assert re.fullmatch(r"\[arsim\] running 2 scenarios: done \(\d+\.\d s\)", log[3]) and len(log) == 4, log
+    assert "alpha failed: RuntimeError: simulated crash" in r.stderr  # (the run's last line, not a progress line)
