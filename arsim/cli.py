@@ -18,7 +18,7 @@ from arsim.core.errors import ArsimError
 from arsim.core.files import check_output_folder, json_text, staged_folder
 from arsim.core.hdr_io import NONFINITE_POLICIES, read_hdr, replace_nonfinite, write_image
 from arsim.core.image_stats import image_stats
-from arsim.core.progress import progress_bar
+from arsim.core.progress import progress_bar, progress_mode
 from arsim.core.resample import LAYOUTS, detect_layout, to_layout
 from arsim.evaluate.compare_methods import DEFAULT_SH_ORDERS, check_request, compare, write_comparison
 from arsim.evaluate.diff import DEFAULT_MAX_FLIP, check_max_flip
@@ -760,10 +760,12 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
     def done(result):
         finished.append(result)
-        update(completed=len(finished), description=f"running scenarios: {Path(result['scenario']).stem} done")
+        state = "done" if result["ok"] else "failed"
+        update(completed=len(finished), description=f"{title}: {Path(result['scenario']).stem} {state}")
 
+    title = f"running {len(args.scenarios)} scenarios"
     with (_output(args, *map(_scenario_file, args.scenarios), args.baselines) as work,
-          progress_bar(f"running {len(args.scenarios)} scenarios", len(args.scenarios)) as update):
+          progress_bar(title, len(args.scenarios), every_update=True) as update):
         summary = run_batch(args.scenarios, work, args.workers, args.ray, args.baselines, args.max_flip, done,
                             cache=args.cache, no_cache=args.no_cache)
     out = args.output
@@ -1161,6 +1163,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        progress_mode()  # a bad $ARSIM_PROGRESS stops here, before any work
         return args.run(args)
     except ArsimError as exc:
         print(f"arsim {args.command}: error: " + " ".join(str(exc).splitlines()), file=sys.stderr)  # one line, always

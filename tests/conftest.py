@@ -27,7 +27,9 @@ def gradient() -> np.ndarray:
 
 def pytest_configure(config):
     """The suite's runs use no run cache unless a test names one (--cache): every stage computed, the user's
-    cache folder untouched."""
+    cache folder untouched; and show no progress lines (tests that check what a command prints on stderr
+    check its messages; tests/test_progress.py turns them on)."""
     import os
 
     os.environ["ARSIM_CACHE"] = "off"
+    os.environ["ARSIM_PROGRESS"] = "off"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from importlib import resources
 
 from arsim.core.errors import ArsimError
@@ -27,6 +29,41 @@ def create_gl_context(require: int = REQUIRED_GL_VERSION):
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ArsimError(f"no headless OpenGL {require // 100}.{require % 100 // 10} context via EGL ({reason}); {_INSTALL_HINT}") from None
     return ctx
+
+
+# A GL timer query's reading (moderngl's Query.elapsed: nanoseconds, read as a 32-bit unsigned integer) is a
+# time only where it is positive and below 2^32 - 1: the driver clamps a result that does not fit (an interval
+# over 4.29 s, or a negative one from a clock that stepped back) to 2^32 - 1, and 0 ns is no GPU work's time
+# (a query that timed nothing). The others are dropped and counted, never reported as times.
+TIMER_CLAMPED_NS = 2**32 - 1
+TIMER_DROPPED = {
+    "zero": "0 ns, a query that timed nothing",
+    "clamped": "2^32 - 1 ns or more, a result that did not fit in 32 bits",
+    "negative": "below 0 ns",
+    "unavailable": "a query that could not be read, or not as a number",
+}
+
+
+def timer_ms(elapsed_ns) -> tuple[float | None, str | None]:
+    """A timer query's reading as (milliseconds, None), or (None, why it is no time: a TIMER_DROPPED key)."""
+    if isinstance(elapsed_ns, bool) or not isinstance(elapsed_ns, numbers.Real) or not math.isfinite(elapsed_ns):
+        return None, "unavailable"  # (None, NaN, infinite, not a number)
+    if elapsed_ns < 0:
+        return None, "negative"
+    if elapsed_ns == 0:
+        return None, "zero"
+    if elapsed_ns >= TIMER_CLAMPED_NS:
+        return None, "clamped"
+    return float(elapsed_ns) / 1e6, None
+
+
+def query_ms(query) -> tuple[float | None, str | None]:
+    """timer_ms of a moderngl timer query (after its `with` block); a query that cannot be read is unavailable."""
+    try:
+        elapsed = query.elapsed
+    except Exception:  # (moderngl.Error from the driver, or a query object without a reading)
+        return None, "unavailable"
+    return timer_ms(elapsed)
 
 
 def core_shader(name: str) -> str:

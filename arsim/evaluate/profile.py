@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from arsim.core.files import atomic_path, json_text, write_text_atomic
-from arsim.render.loop import FRAME_STEPS, FrameRecord  # (the render thread's steps 3-7, PRT's relight among them)
+from arsim.core.gl import TIMER_DROPPED
+from arsim.render.loop import FRAME_STEPS, GL_STEPS, FrameRecord  # (the render thread's steps 3-7, PRT's relight among them)
 
 TRACKS = ("frame",) + FRAME_STEPS + ("track",)
 PERCENTILES = (50, 95, 99)
@@ -28,6 +29,39 @@ def _stats(values) -> dict:
     if v.size == 0:
         return {}
     return {f"p{p}": float(np.percentile(v, p)) for p in PERCENTILES} | {"max": float(v.max()), "frames": int(v.size)}
+
+
+def gl_dropped(records: list[FrameRecord]) -> dict[str, dict[str, int]]:
+    """Per step, the GL timer readings dropped as no time (core.gl.timer_ms), counted by why; only the steps
+    with one."""
+    counts: dict[str, dict[str, int]] = {}
+    for r in records:
+        for step, why in r.gl_dropped.items():
+            counts.setdefault(step, {}).setdefault(why, 0)
+            counts[step][why] += 1
+    return {step: dict(sorted(c.items())) for step, c in sorted(counts.items())}
+
+
+def step_gl_figures(records: list[FrameRecord]) -> dict:
+    """metrics.json's GL timings: step_gl_ms, per GL step the median of its readings that are times (None, n/a,
+    where the step was timed but none was), and step_gl_dropped, per step the others counted by why."""
+    dropped = gl_dropped(records)
+    medians = {}
+    for step in GL_STEPS:
+        ms = [r.gl_ms[step] for r in records if step in r.gl_ms]
+        if ms or step in dropped:
+            medians[step] = float(np.median(ms)) if ms else None
+    return {"step_gl_ms": medians, "step_gl_dropped": dropped}
+
+
+def dropped_text(dropped: dict[str, dict[str, int]], valid: dict[str, int] | None = None) -> str:
+    """The dropped readings in words, e.g. "objects 2 of 120 (2 zero)"; valid: per step the readings kept."""
+    parts = []
+    for step, reasons in dropped.items():
+        n = sum(reasons.values())
+        of = f" of {n + valid.get(step, 0)}" if valid is not None else ""
+        parts.append(f"{step} {n}{of} (" + ", ".join(f"{k} {why}" for why, k in reasons.items()) + ")")
+    return "; ".join(parts)
 
 
 @dataclass
@@ -47,6 +81,7 @@ class ProfileRun:
         return next((k + 1 for k, r in enumerate(self.records) if r.bake_done), None)
 
     def summary(self) -> dict:
+        dropped = gl_dropped(self.records)
         frame = self.frame_ms()
         misses = int((frame > self.budget_ms).sum())
         end = self.bake_end()
@@ -64,10 +99,13 @@ class ProfileRun:
                      "work_done_pct": 100.0 * self.records[-1].bake_work_progress if self.records else 0.0,
                      "worst_frame_ms": float(baking.max()) if baking.size else None,
                      "within_budget_pct_while_baking": 100.0 * float((baking <= self.budget_ms).mean()) if baking.size else None,
+                     # (over the valid GL readings: steps["bake"]["gl_dropped"] counts the others)
                      "gl_ms_total": float(sum(r.gl_ms.get("bake", 0.0) for r in self.records))},
             "steps": {s: {"cpu": _stats([r.cpu_ms[s] for r in self.records if s in r.cpu_ms]),
-                          "gl": _stats([r.gl_ms[s] for r in self.records if s in r.gl_ms])}
+                          "gl": _stats([r.gl_ms[s] for r in self.records if s in r.gl_ms]),
+                          "gl_dropped": dropped.get(s, {})}
                       for s in FRAME_STEPS + ("track",)},
+            "gl_dropped_why": {why: TIMER_DROPPED[why] for why in sorted({w for c in dropped.values() for w in c})},
         }
 
     def trace(self) -> dict:
@@ -85,8 +123,15 @@ class ProfileRun:
                 if s in r.cpu_ms:
                     events.append({"name": s, "cat": "step", "ph": "X", "pid": 1, "tid": TRACKS.index(s),
                                    "ts": 1000 * r.step_start_ms[s], "dur": 1000 * r.cpu_ms[s],
-                                   "args": {"frame": r.index, "gl_ms": r.gl_ms.get(s)} | ({"tiles": r.bake_tiles} if s == "bake" else {})})
+                                   "args": {"frame": r.index, "gl_ms": r.gl_ms.get(s)}
+                                   | ({"gl_dropped": r.gl_dropped[s]} if s in r.gl_dropped else {})
+                                   | ({"tiles": r.bake_tiles} if s == "bake" else {})})
         return {"traceEvents": events, "displayTimeUnit": "ms"}
+
+
+def _gl_cell(ms: float) -> str:
+    """A GL time in the table: below 1 µs in two significant digits (a reading of 20 ns is not one of 0)."""
+    return f"{ms:.3f}" if ms >= 0.001 else f"{ms:.1e}"
 
 
 def markdown(runs: list[ProfileRun]) -> str:
@@ -105,19 +150,27 @@ def markdown(runs: list[ProfileRun]) -> str:
                                        f"those frames within budget; GL time {b['gl_ms_total']:.1f} ms"
                                        if b["completed"] else
                                        f"not complete: {b['texels_done_pct']:.2f} % of the texels and {b['work_done_pct']:.2f} % "
-                                       f"of the work done; GL time {b['gl_ms_total']:.1f} ms"))
+                                       f"of the work done; GL time {b['gl_ms_total']:.1f} ms")
+                         + (f" (over its valid timer readings; {sum(s['steps']['bake']['gl_dropped'].values())} dropped)"
+                            if s["steps"]["bake"]["gl_dropped"] else ""))
         lines += ["",
                   "| step | CPU p50 | CPU p95 | CPU p99 | CPU max | GL p50 | GL p95 | GL p99 | GL max | frames |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         rows = [("frame (steps 3-7)", s["frame_ms"], {})] + [(name, v["cpu"], v["gl"]) for name, v in s["steps"].items()]
+        dropped = {name: v["gl_dropped"] for name, v in s["steps"].items() if v["gl_dropped"]}
         for name, cpu, gl in rows:
             if not cpu:
                 continue
             cells = [f"{cpu[k]:.3f}" for k in ("p50", "p95", "p99", "max")]
-            cells += [f"{gl[k]:.3f}" for k in ("p50", "p95", "p99", "max")] if gl else ["", "", "", ""]
+            # n/a: the step was timed on the GL but no reading was a time
+            cells += [_gl_cell(gl[k]) for k in ("p50", "p95", "p99", "max")] if gl else ["n/a"] * 4 if name in dropped else [""] * 4
             lines.append(f"| {name} | " + " | ".join(cells) + f" | {cpu['frames']} |")
+        valid = {name: v["gl"].get("frames", 0) for name, v in s["steps"].items()}
         lines += ["", "Milliseconds. The frame is the render thread's steps 3-7; `track` (the tag tracker) runs on the "
-                  "camera's thread, outside the budget.", ""]
+                  "camera's thread, outside the budget. GL: the timer queries' readings that are times; "
+                  + ("dropped as no time: " + dropped_text(dropped, valid) + "; "
+                     + "; ".join(f"{why}: {text}" for why, text in s["gl_dropped_why"].items()) + "."
+                     if dropped else "none dropped (every reading was a time)."), ""]
     if len(runs) > 1:
         lines += ["## Sweep (as the thesis's table 6.6)", "", sweep_table(runs), ""]
     return "\n".join(lines)
@@ -161,7 +214,10 @@ def plot_timeline(run: ProfileRun, path: Path) -> None:
     ax.set_title(f"Frame time, tile policy {run.label} ({run.method} maps)" if baking else f"Frame time, {run.label} ({run.method} maps)")
     ax.set_ylim(0, max(float(np.percentile(bottom, 99.5)) * 1.2, run.budget_ms * 1.3))
     ax.legend(loc="upper right", fontsize=8, ncol=2)
-    fig.tight_layout()
+    dropped = gl_dropped(run.records)  # (the plot is CPU time; its GL readings' validity said beside it)
+    fig.text(0.01, 0.01, "GL timer readings dropped as no time: " + dropped_text(dropped) if dropped else
+             "GL timer readings: none dropped", fontsize=7, color="tab:red" if dropped else "0.4")
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from arsim.evaluate.profile import step_gl_figures
 from arsim.evaluate.tracking import TrackingRun, measure_poses
 from arsim.lighting.mapset import MapSet
 from arsim.render.session import SessionResult
@@ -28,8 +29,7 @@ def session_metrics(rec: Recording, session: SessionResult) -> tuple[TrackingRun
         figures["flip_per_frame"] = [None if not np.isfinite(f) else float(f) for f in session.flip]
     else:
         absent["scenario"] = NO_SCENARIO
-    figures |= {"step_ms": {name: float(np.median(v)) for name, v in session.step_ms.items() if v},
-                "step_gl_ms": {name: float(np.median(v)) for name, v in session.gl_ms.items() if v}}
+    figures |= {"step_ms": {name: float(np.median(v)) for name, v in session.step_ms.items() if v}} | step_gl_figures(session.records)
     return tracking, figures | ({"truth": absent} if absent else {})
 
 

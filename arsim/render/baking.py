@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from arsim.core.errors import ArsimError
+from arsim.core.gl import query_ms
 from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, Tile, tiles
 from arsim.lighting.gl_bake import GLAccurateBaker, GLShBaker
 from arsim.lighting.methods import LOOP_METHODS, SH_ORDER
@@ -83,8 +84,11 @@ class LoopBaker:
         self.query = ctx.query(time=True)
         self.cost_per_work: deque[float] = deque(maxlen=8)  # measured GL ms per unit of work, recent tiles
         self.idle_frames = 0
-        self.gl_ms_total = 0.0
-        self.last_gl_ms = 0.0  # the GL time of the last step's tiles
+        self.gl_ms_total = 0.0  # over the valid timer readings
+        # The GL time of the last step's tiles (None: it drew none, or its reading was no time: core.gl.timer_ms),
+        # and why its reading was dropped
+        self.last_gl_ms: float | None = None
+        self.last_gl_dropped: str | None = None
         self.shaded: dict[Tile, int] = {}
         self.work_total, self.work_done = sum(self._work(piece) for piece in self.queue), 0.0
 
@@ -182,7 +186,7 @@ class LoopBaker:
     def step(self, available_ms: float) -> int:
         """Bake the next tile (fixed size), or the pieces predicted to fit in available_ms (auto); returns
         how many."""
-        self.last_gl_ms = 0.0
+        self.last_gl_ms, self.last_gl_dropped = None, None
         if self.done:
             return 0
         if self.settings.tile is None:
@@ -205,8 +209,8 @@ class LoopBaker:
         # The schedule follows the time the render thread waits for the bake, which is what the budget
         # holds: on llvmpipe, a timer query can miss part of a draw spread over its threads.
         waited = 1000 * (time.perf_counter() - start)
-        self.last_gl_ms = self.query.elapsed / 1e6
-        self.gl_ms_total += self.last_gl_ms
+        self.last_gl_ms, self.last_gl_dropped = query_ms(self.query)
+        self.gl_ms_total += self.last_gl_ms or 0.0
         work = sum(self._work(piece) for piece in batch)
         if work > 0:
             self.cost_per_work.append(max(waited - TILE_OVERHEAD_MS * len(batch), 0.0) / work)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from arsim.core.gl import query_ms
 from arsim.render.baking import LoopBaker
 from arsim.render.renderer import Renderer
 from arsim.tracking.apriltag import TagPose, TagTracker
@@ -41,7 +42,8 @@ class FrameRecord:
     index: int  # the camera frame's index in the recording
     start_ms: float  # since the loop's first frame began
     cpu_ms: dict[str, float] = field(default_factory=dict)  # per step that ran
-    gl_ms: dict[str, float] = field(default_factory=dict)
+    gl_ms: dict[str, float] = field(default_factory=dict)  # per GL step with a valid timer reading (core.gl.timer_ms)
+    gl_dropped: dict[str, str] = field(default_factory=dict)  # per GL step whose reading was no time: why (TIMER_DROPPED)
     step_start_ms: dict[str, float] = field(default_factory=dict)
     found: bool = False
     bake_tiles: int = 0
@@ -87,10 +89,17 @@ class FrameLoop:
             with self.query:
                 work()
             self.ctx.finish()
-            record.gl_ms[name] = self.query.elapsed / 1e6
+            self._gl_reading(record, name, *query_ms(self.query))
         else:
             work()
         record.cpu_ms[name] = 1000 * (time.perf_counter() - start)
+
+    @staticmethod
+    def _gl_reading(record: FrameRecord, name: str, ms: float | None, dropped: str | None) -> None:
+        if ms is None:
+            record.gl_dropped[name] = dropped
+        else:
+            record.gl_ms[name] = ms
 
     def _bake(self, record: FrameRecord) -> None:
         # The most the other steps took in recent frames like this one: their time rises for frames on end
@@ -153,7 +162,8 @@ class FrameLoop:
         if self.baker is not None and not self.baked_in_use:
             # (timed on the CPU here; the baker times its own GL work: timer queries cannot nest)
             self._timed(record, "bake", lambda: self._bake(record), gl=False)
-            record.gl_ms["bake"] = self.baker.last_gl_ms
+            if self.baker.last_gl_ms is not None or self.baker.last_gl_dropped is not None:  # (a frame it drew in)
+                self._gl_reading(record, "bake", self.baker.last_gl_ms, self.baker.last_gl_dropped)
             record.bake_progress = self.baker.progress
             record.bake_work_progress = self.baker.work_progress
         r = self.renderer

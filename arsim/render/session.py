@@ -272,8 +272,8 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
         after += loop.baked_in_use
         if after > tail_frames:
             break
-        if n % 20 == 0:
-            progress(baker.progress)
+        if n % 20 == 0:  # (it ends when the bake is done, or at max_frames: the nearer of the two)
+            progress(max(baker.progress, (n + 1) / max_frames))
     progress(1.0)
     baker.release()
     return records

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
+from arsim.core.progress import PROGRESS_ENV
 from arsim.evaluate.diff import check_max_flip
 from arsim.evaluate.registry import metric_for
 from arsim.scenario.loader import scenario_path
@@ -70,7 +71,8 @@ def run_one(scenario: str, out: str, baseline: str | None, max_flip: float, cach
     """One scenario's `arsim run` (also what a Ray task runs): its status, metrics and regression."""
     start, started = time.perf_counter(), time.time()
     done = subprocess.run(run_command(Path(scenario), Path(out), Path(baseline) if baseline else None, max_flip, cache),
-                          capture_output=True, text=True, env=os.environ | {"PYTHONUNBUFFERED": "1"})
+                          # (its stderr is kept for its last line, the error: its progress lines would go nowhere)
+                          capture_output=True, text=True, env=os.environ | {"PYTHONUNBUFFERED": "1", PROGRESS_ENV: "off"})
     result = {"scenario": scenario, "out": out, "returncode": done.returncode, "wall_s": time.perf_counter() - start}
 
     def written(path: Path) -> bool:  # by this run: a file left by an earlier run into the folder does not count

@@ -428,9 +428,10 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
 
     # 3. The light estimates over the sweep (the truth's, the capture's as it grew, each frame's alone), scored.
     def make_estimates(description):
-        with step("estimates", description):
+        with step("estimates", description) as update:
             (out / "estimates").mkdir(exist_ok=True)
-            return estimated_sweep(sweep, out / "estimates", result=captured)
+            # (its frames' progress shown as this step's)
+            return estimated_sweep(sweep, out / "estimates", result=captured, stage=lambda d: contextlib.nullcontext(update))
 
     estimates, _ = stages.run("estimates", keys["estimates"], "3/6 estimating the light as phones report them", make_estimates,
                               _save_estimates, _load_estimates)

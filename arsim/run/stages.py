@@ -3,8 +3,8 @@ against the truth, an AR session's inputs, the AR session rendered and measured,
 while it bakes. `arsim run` (pipeline.py) chains them all; `arsim record`, `capture`, `render` and `profile`
 call one each; the command line only parses, calls and prints.
 
-`stage(description)` is a context manager yielding update(completed=None, description=None): a progress
-bar on a terminal, nothing elsewhere (quiet_stage).
+`stage(description)` is a context manager yielding update(completed=None, description=None): the commands
+pass core.progress's (a bar on a terminal, plain lines elsewhere); the default, quiet_stage, shows nothing.
 """
 
 from __future__ import annotations
