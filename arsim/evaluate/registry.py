@@ -135,7 +135,8 @@ METRICS: tuple[Metric, ...] = (
            floor=0.5, **_TIME),
     Metric("session.step_gl_ms.*", "step time (GL, median)", "ms", "a render-loop step's median GPU time (valid "
            "timer readings only)", floor=0.5, **_TIME),
-    Metric("session.step_gl_dropped.*", "timer readings dropped", "readings", "GL timer readings that were not times", NEUTRAL),
+    Metric("session.step_gl_dropped.*.*", "GL timer readings dropped", "readings", "a step's GL timer readings that "
+           "were no time (zero, clamped at 2^32 - 1 ns, negative, unavailable), by why", NEUTRAL),
 )
 
 
