@@ -261,9 +261,10 @@ def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, trac
     exponents = next(iter(maps.values())).exponents
     maps_grid({name: np.stack([m[s] for s in exponents]) for name, m in maps.items()}, exponents, report / "maps.png",
               "Irradiance (s = 1) and reflection maps baked from the captured probe")
-    method = scenario.render.method
-    if truth_maps and method in truth_maps and method in maps:
-        plot_maps_vs_truth(maps[method], truth_maps[method], report / "maps_vs_truth.png")
+    compared = [name for name in maps if truth_maps and name in truth_maps]  # [render] method's first
+    compared.sort(key=lambda name: name != scenario.render.method)
+    for name in compared:
+        plot_maps_vs_truth(maps[name], truth_maps[name], report / f"maps_vs_truth_{name}.png")
     if tracking.measured:
         plot_tracking(tracking, frames, report / "tracking.png")
     s = metrics["session"]
@@ -310,7 +311,7 @@ costs), against the true environment's exact (accurate) maps (capture and method
 error on the true environment. Accurate and bounds maps are baked on the GL path (float32, held to the NumPy float64
 sums within 1e-3 by the tests).</p>
 {_table(['method', 'map', 'vs truth, same method (%)', 'vs truth, accurate (%)', 'method on truth (%)'], map_rows)}
-{_img(report / 'maps_vs_truth.png', 'maps against the truth', 1100) if (report / 'maps_vs_truth.png').is_file() else ''}"""
+{''.join(_img(report / f'maps_vs_truth_{name}.png', f'{name} maps against the truth', 1100) for name in compared)}"""
     truth_note = "".join(f"<li>{html.escape(_why(why))}</li>" for why in absent.values())
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>arsim run: {html.escape(scenario.run.name)}</title>
