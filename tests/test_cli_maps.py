@@ -76,12 +76,13 @@ def test_compare_methods_writes_tables_and_figures(tmp_path, probe32):
     r = arsim("compare-methods", probe32, "-o", tmp_path, "--spec", "1,20", "--methods", "fast,mipmap,sh",
               "--sh-orders", "3,6")
     assert r.returncode == 0, r.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == [OUTPUT_MARK, "methods.png", "sh_order.png", "tables.json", "tables.md"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [OUTPUT_MARK, "methods.png", "sh_order.png", "tables.csv",
+                                                          "tables.json", "tables.md"]
     tables = json.loads((tmp_path / "tables.json").read_text())
     assert set(tables["errors_percent"]) == {"fast", "mipmap", "sh"}
     assert tables["errors_percent"]["fast"][0]["mean"] < 0.5
     assert len(tables["sh_mean_error_percent_by_order"]["stable"]) == 2
-    assert "| fast |" in (tmp_path / "tables.md").read_text()
+    assert "| fast (SH order 64) |" in (tmp_path / "tables.md").read_text()  # s = 1 and 20 both take the minimum, 64
 
 
 def test_bad_map_inputs_give_one_line_and_exit_status_2(tmp_path, probe32):
