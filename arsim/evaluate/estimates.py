@@ -161,3 +161,72 @@ def _sphere_image(rows: dict, path) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=100, bbox_inches="tight")
     plt.close(fig)
+
+
+def estimate_summary(figures: dict, ar_scores: dict) -> dict:
+    """metrics.json's `estimates`: per estimator its scores at the sweep's end (SH error, main light, ambient,
+    diffuse and mirror spheres), its convergence and stability, and the FLIP of the AR objects lit by it
+    against the truth frame (the mean over the frames shown, and per frame)."""
+    out = {}
+    for name in ("truth", *ESTIMATORS):
+        f = figures.get(name)
+        scored = ar_scores.get(name, {})
+        if f is None and not scored:
+            continue
+        row = {}
+        if f is not None:
+            spheres = f.get("spheres", {})
+            row = dict(f.get("final", {}), **{k: f[k] for k in ("converged_at_frame", "stability") if k in f},
+                       diffuse_sphere_rmse=spheres.get("diffuse", {}).get("rmse"),
+                       mirror_sphere_hdr_flip=spheres.get("mirror", {}).get("hdr_flip"))
+        if scored:
+            row["ar_flip_mean"] = float(np.mean(list(scored.values())))
+            row["ar_flip_per_frame"] = {str(k): v for k, v in sorted(scored.items())}
+        out[name] = row
+    return out
+
+
+CROP_MARGIN = 24  # pixels around the objects in the frames compared
+CROP_HEIGHT = 180  # the crops' height in estimates/frames/*.png
+
+
+def write_estimate_frames(frames: dict, folder) -> list:
+    """Per frame shown (render.session's estimate_frames): a PNG of the objects' region in the truth frame
+    and lit by each estimate, the FLIP error of each below it (magma, 0 to 1) with its mean over the objects
+    (without a truth frame: the objects' mask and the frames lit by each estimate, in one row);
+    returns the paths written."""
+    import cv2
+
+    from arsim.core.files import write_bytes_atomic
+    from arsim.core.png import png_bytes
+    from arsim.evaluate.diff import magma, flip_map
+
+    written = []
+    for k, shown in sorted(frames.items()):
+        folder.mkdir(parents=True, exist_ok=True)
+        mask, truth = shown["mask"], shown["truth_frame"]
+        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        box = (slice(max(rows[0] - CROP_MARGIN, 0), rows[-1] + CROP_MARGIN + 1),
+               slice(max(cols[0] - CROP_MARGIN, 0), cols[-1] + CROP_MARGIN + 1))
+        scale = CROP_HEIGHT / (box[0].stop - box[0].start)
+        size = (max(int(round((box[1].stop - box[1].start) * scale)), 1), CROP_HEIGHT)
+
+        def tile(image, label):
+            t = np.ascontiguousarray(np.pad(cv2.resize(image[box], size, interpolation=cv2.INTER_NEAREST), ((16, 0), (0, 4), (0, 0))))
+            cv2.putText(t, label, (3, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
+            return t
+
+        top = [tile(truth, "truth frame")] if truth is not None else []
+        bottom = [tile(np.repeat(mask[..., None], 3, axis=-1).astype(np.uint8) * 255, "objects' mask")]
+        for name, image in shown["lit"].items():
+            top.append(tile(image, f"{name}'s estimate"))
+            if truth is not None:
+                error = flip_map(truth, image, mask)
+                bottom.append(tile(magma(error), f"FLIP {float(error[mask].mean()):.4f}"))
+        if truth is None:  # (no truth frame: the estimates' frames beside the objects' mask, nothing scored)
+            top, bottom = bottom + top, []
+        rows = [np.concatenate(r, axis=1) for r in (top, bottom) if r]
+        path = folder / f"{k:06d}.png"
+        write_bytes_atomic(path, png_bytes(np.concatenate(rows, axis=0)))
+        written.append(path)
+    return written
