@@ -647,10 +647,11 @@ def cmd_compare_methods(args: argparse.Namespace) -> int:
             comparison = compare(env, args.spec, args.methods, _parameters(args), args.reference_texels,
                                  args.sh_orders, progress=on_stage)
         paths = _final(write_comparison(comparison, work), work, args.output)
+    width = max((len(comparison.label(name)) for name in comparison.errors), default=0)
     for name, errors in comparison.errors.items():
         worst_mean = max(e["mean"] for e in errors)
         worst_max = max(e["max"] for e in errors)
-        print(f"{name:<9} mean error up to {worst_mean:8.3f} %  max error up to {worst_max:9.2f} %  "
+        print(f"{comparison.label(name):<{width}}  mean error up to {worst_mean:8.3f} %  max error up to {worst_max:9.2f} %  "
               f"{comparison.seconds[name]:7.2f} s")
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0

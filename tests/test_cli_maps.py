@@ -1,5 +1,6 @@
 """arsim bake and arsim compare-methods: the files they write, and one-line errors for bad input."""
 
+import csv
 import json
 
 import numpy as np
@@ -76,12 +77,20 @@ def test_compare_methods_writes_tables_and_figures(tmp_path, probe32):
     r = arsim("compare-methods", probe32, "-o", tmp_path, "--spec", "1,20", "--methods", "fast,mipmap,sh",
               "--sh-orders", "3,6")
     assert r.returncode == 0, r.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == [OUTPUT_MARK, "methods.png", "sh_order.png", "tables.json", "tables.md"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [OUTPUT_MARK, "methods.png", "sh_order.png", "tables.csv",
+                                                          "tables.json", "tables.md"]
     tables = json.loads((tmp_path / "tables.json").read_text())
     assert set(tables["errors_percent"]) == {"fast", "mipmap", "sh"}
     assert tables["errors_percent"]["fast"][0]["mean"] < 0.5
     assert len(tables["sh_mean_error_percent_by_order"]["stable"]) == 2
-    assert "| fast |" in (tmp_path / "tables.md").read_text()
+    md = (tmp_path / "tables.md").read_text()
+    assert "| fast (SH order 64) |" in md  # s = 1 and 20 both take the minimum, 64
+    assert "| sh (order 35, window none) |" in md and "| mipmap |" in md
+    # the printed table and tables.csv name the orders too
+    assert "sh (order 35, window none)  mean error up to" in r.stdout and "fast (SH order 64)" in r.stdout
+    rows = list(csv.DictReader((tmp_path / "tables.csv").open()))
+    assert [(r["label"], r["sh_order"], r["sh_window"]) for r in rows if r["method"] == "sh"] == [
+        ("sh (order 35, window none)", "35", "none")] * 2
 
 
 def test_bad_map_inputs_give_one_line_and_exit_status_2(tmp_path, probe32):

@@ -162,16 +162,30 @@ def plot_drift(result: CaptureResult, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(9, 3.5))
     for label, orientations, alpha in curves:
         ax.plot(result.t_s, orientation_errors_deg(orientations, reference), label=label, alpha=alpha)
-    ax.scatter(result.t_s[result.aligned], np.zeros(result.aligned.sum()), s=2, color="tab:gray", label="online alignment succeeded")
+    # a rug along the bottom (axes coordinates), off the curves that start at zero
+    ax.plot(result.t_s[result.aligned], np.full(int(result.aligned.sum()), 0.02), "|", ms=4, color="tab:gray",
+            transform=ax.get_xaxis_transform(), label="online alignment succeeded (frames)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend()
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)  # beside the axes: off the curves
     return _save(fig, path)
 
 
-def plot_coverage_map(result: CaptureResult, path: Path) -> Path:
+ANGLE_MAP_AXES = "angle map: centre +z, up +y, right +x, rim -z"
+
+
+def _radiance_colorbar(fig, ax, scale: float, what: str) -> None:
+    """A grey ramp for images shown as clip(x * scale, 0, 1)^(1/2.2): the radiance each shade stands for."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import PowerNorm
+
+    fig.colorbar(ScalarMappable(PowerNorm(1 / 2.2, vmin=0.0, vmax=1.0 / scale), cmap="gray"), ax=ax, shrink=0.8,
+                 extend="max", label=f"{what} radiance per channel\n(the environment's units, gamma 2.2)")
+
+
+def coverage_map_figure(result: CaptureResult):
     plt = _pyplot()
     acc = result.accumulator
     weight = acc.weights.sum(axis=0).mean(axis=-1)
@@ -181,10 +195,17 @@ def plot_coverage_map(result: CaptureResult, path: Path) -> Path:
     shown = np.where(anglemap_disk_mask(acc.size) & seen, np.log10(np.maximum(relative, 1e-6)), np.nan)
     image = ax.imshow(shown, cmap="magma", vmin=-6, vmax=0)
     ax.contour(acc.clipped_only(), levels=[0.5], colors="cyan", linewidths=0.7)
-    fig.colorbar(image, ax=ax, label="log10 of the sum of weights (relative to the largest)")
+    fig.colorbar(image, ax=ax, shrink=0.85, extend="min",
+                 label="log10 of the texel's summed weight\n(relative to the largest; unitless)")
     ax.set_title(f"Captured weight per texel; {100 * acc.coverage():.2f} % covered\n(cyan: only ever seen clipped)")
-    ax.axis("off")
-    return _save(fig, path)
+    ax.set_xlabel(ANGLE_MAP_AXES, fontsize=8)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    return fig
+
+
+def plot_coverage_map(result: CaptureResult, path: Path) -> Path:
+    return _save(coverage_map_figure(result), path)
 
 
 def plot_probe(probe: np.ndarray, path: Path) -> Path:
@@ -192,14 +213,19 @@ def plot_probe(probe: np.ndarray, path: Path) -> Path:
     plt = _pyplot()
     inside = anglemap_disk_mask(probe.shape[0])
     scale = 0.18 / max(float(np.median((probe @ LUMA)[inside])), 1e-12)
-    fig, ax = plt.subplots(figsize=(5.5, 5))
-    ax.imshow(np.clip((probe * scale) ** (1 / 2.2), 0, 1))
+    fig, ax = plt.subplots(figsize=(6.5, 5))
+    ax.imshow(np.clip(np.maximum(probe * scale, 0.0) ** (1 / 2.2), 0, 1))
     ax.set_title("captured (holes filled); no true environment to compare with")
-    ax.axis("off")
+    _radiance_colorbar(fig, ax, scale, "captured")
+    ax.set_xlabel(ANGLE_MAP_AXES, fontsize=8)
+    ax.set_xticks([])
+    ax.set_yticks([])
     return _save(fig, path)
 
 
-def plot_probe_vs_truth(probe: np.ndarray, truth: np.ndarray, path: Path) -> Path:
+def probe_vs_truth_figure(probe: np.ndarray, truth: np.ndarray):
+    """The captured probe and the truth on one exposure (a grey ramp gives the radiance of each shade), and
+    the relative error of luminance per texel (its colour bar in percent, clipped at 20 %)."""
     plt = _pyplot()
     inside = anglemap_disk_mask(probe.shape[0])
     scale = 0.18 / max(float(np.median((truth @ LUMA)[inside])), 1e-12)  # the same exposure for both
@@ -208,17 +234,24 @@ def plot_probe_vs_truth(probe: np.ndarray, truth: np.ndarray, path: Path) -> Pat
         return np.clip(np.maximum(x * scale, 0.0) ** (1 / 2.2), 0, 1)  # (a probe may hold slightly negative texels)
 
     rel = np.where(inside, np.abs(probe @ LUMA - truth @ LUMA) / (truth @ LUMA + 1e-4 * (truth @ LUMA)[inside].mean()), np.nan)
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.8))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
     axes[0].imshow(shown(probe))
-    axes[0].set_title("captured")
+    axes[0].set_title("captured (holes filled)")
     axes[1].imshow(shown(truth))
     axes[1].set_title("truth")
+    _radiance_colorbar(fig, axes[:2].tolist(), scale, "captured and true")
     image = axes[2].imshow(100 * rel, cmap="viridis", vmin=0, vmax=20)
-    axes[2].set_title("relative error of luminance (%)")
-    fig.colorbar(image, ax=axes[2], label="%")
+    axes[2].set_title("relative error of luminance")
+    fig.colorbar(image, ax=axes[2], shrink=0.8, extend="max", label="|captured - true| / true luminance (%)")
     for ax in axes:
-        ax.axis("off")
-    return _save(fig, path)
+        ax.set_xlabel(ANGLE_MAP_AXES, fontsize=8)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    return fig
+
+
+def plot_probe_vs_truth(probe: np.ndarray, truth: np.ndarray, path: Path) -> Path:
+    return _save(probe_vs_truth_figure(probe, truth), path)
 
 
 def write_capture(result: CaptureResult, truth: np.ndarray | None, response_error: dict | None, out_dir: Path,

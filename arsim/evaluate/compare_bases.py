@@ -281,12 +281,18 @@ def visual_comparison(signal: Signal, size: int = 192, domes: int = 3,
     return VisualComparison(reference, tiles)
 
 
-def visual_figures(v: VisualComparison, path_tiles: Path, path_errors: Path, title: str) -> None:
-    """The tiles (irradiance on a shared exposure, sRGB) and their error maps (|E~ - E| / max E)."""
+ERROR_SHOWN_MAX = 0.25  # visual_errors.png's colour scale: |E~ - E| / max E from 0 to this (beyond: the top colour)
+
+
+def visual_figure(v: VisualComparison, kind: str, title: str):
+    """kind "tiles": the tiles' irradiance on one shared exposure (sRGB), with a colour bar of that scale;
+    "errors": their error maps |E~ - E| / max E, with a colour bar in percent."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize, PowerNorm
 
     scale = float(np.percentile(v.reference, 99.5))
     errors = v.errors()
@@ -294,22 +300,42 @@ def visual_figures(v: VisualComparison, path_tiles: Path, path_errors: Path, tit
     columns = 6
     rows = -(-len(keys) // columns)
     peak = float(v.reference.max())
+    fig, axes = plt.subplots(rows, columns, figsize=(2.0 * columns + 1.0, 2.15 * rows + 0.3), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, key in zip(axes.flat, keys):
+        image = v.reference if key == "reference" else v.tiles[key]
+        if kind == "tiles":
+            ax.imshow(np.clip(np.maximum(image, 0.0) / scale, 0, 1) ** (1 / 2.2))
+        else:
+            ax.imshow(100 * np.abs(image - v.reference).mean(axis=-1) / peak, cmap="magma", vmin=0,
+                      vmax=100 * ERROR_SHOWN_MAX)
+        if key == "reference":
+            ax.set_title("reference (exact)" + ("" if kind == "tiles" else "\nno error"), fontsize=7)
+        else:
+            ax.set_title(f"{_label(key)}\n{100 * errors[key]:.2f} %", fontsize=7)
+    if kind == "tiles":  # every tile on the reference's exposure: a grey ramp stands for each channel's scale
+        shown = ScalarMappable(PowerNorm(1 / 2.2, vmin=0.0, vmax=scale), cmap="gray")
+        label = "irradiance E per channel\n(the map's radiance units x sr, gamma 2.2)"
+        suffix = ": irradiance per pixel, one exposure; above each tile its relative squared error"
+    else:
+        shown = ScalarMappable(Normalize(0.0, 100 * ERROR_SHOWN_MAX), cmap="magma")
+        label = "|E~ - E| / max E (%), mean of the channels"
+        suffix = ": error per pixel; above each tile its relative squared error"
+    fig.colorbar(shown, ax=axes.ravel().tolist(), fraction=0.02, pad=0.02, label=label,
+                 extend="neither" if kind == "tiles" else "max")
+    fig.suptitle(title + suffix, fontsize=9)
+    return fig
+
+
+def visual_figures(v: VisualComparison, path_tiles: Path, path_errors: Path, title: str) -> None:
+    """visual.png (the tiles) and visual_errors.png (their error maps), each with its colour bar."""
+    import matplotlib.pyplot as plt
+
     for path, kind in ((path_tiles, "tiles"), (path_errors, "errors")):
-        fig, axes = plt.subplots(rows, columns, figsize=(2.0 * columns, 2.15 * rows), squeeze=False)
-        for ax in axes.flat:
-            ax.axis("off")
-        for ax, key in zip(axes.flat, keys):
-            image = v.reference if key == "reference" else v.tiles[key]
-            if kind == "tiles":
-                ax.imshow(np.clip(np.maximum(image, 0.0) / scale, 0, 1) ** (1 / 2.2))
-            else:
-                ax.imshow(np.abs(image - v.reference).mean(axis=-1) / peak, cmap="magma", vmin=0, vmax=0.25)
-            ax.set_title("reference (exact)" if key == "reference" else f"{_label(key)}\n{100 * errors[key]:.2f} %",
-                         fontsize=7)
-        fig.suptitle(title + ("" if kind == "tiles" else ": |E~ - E| / max E (0 to 0.25)"), fontsize=9)
-        fig.tight_layout()
+        fig = visual_figure(v, kind, title)
         with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=100)
+            fig.savefig(tmp, format="png", dpi=100, bbox_inches="tight")
         plt.close(fig)
 
 

@@ -3,7 +3,9 @@ against order (stable and thesis-faithful evaluation)."""
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import io
 import json
 import time
 from collections.abc import Callable, Sequence
@@ -17,11 +19,13 @@ from arsim.core.files import atomic_path, write_text_atomic
 from arsim.core.hdr_io import tonemap_preview
 from arsim.evaluate.metrics import map_error
 from arsim.lighting.accurate import lobe_average_at
-from arsim.lighting.methods import MapParameters, bake, method
+from arsim.lighting.methods import MapParameters, bake, method, sh_orders_used
 from arsim.lighting.sh import sh_maps
 
 DEFAULT_SH_ORDERS = (5, 10, 20, 35, 64, 128)
 FULL_REFERENCE_MAX_SIZE = 128
+# What the SH error-against-order study runs: sh at each order with plain truncation, whatever --sh-window says.
+SH_STUDY = "sh, plain truncation (window none), stable and factorial (Alg. 2.5/2.6) Y_lm"
 
 
 @dataclass
@@ -37,15 +41,46 @@ class Comparison:
     maps: dict[str, np.ndarray] = field(default_factory=dict)  # method -> (E, N, N, 3)
     sh_orders: list[int] = field(default_factory=list)
     sh_error_by_order: dict[str, list[list[float]]] = field(default_factory=dict)  # mode -> [order][exponent] mean %
+    params: MapParameters = field(default_factory=MapParameters)  # what the methods were run with
+
+    def sh_orders_used(self, name: str) -> list[int] | None:
+        """The SH order of each exponent's map for an SH-based method (sh, fast, sht), else None."""
+        return sh_orders_used(name, self.params, self.exponents)
+
+    def label(self, name: str) -> str:
+        """A method's name with what its error depends on: the SH order (per exponent where it varies),
+        and sh's window and evaluation; the same in the printed table, the files and the figures."""
+        orders = self.sh_orders_used(name)
+        if orders is None:
+            return name
+        if name == "sh":
+            extra = f", window {self.params.sh_window}"
+            extra += ", factorial Y_lm" if self.params.sh_faithful else ""
+            return f"sh (order {self.params.sh_order}{extra})"
+        low, high = min(orders), max(orders)
+        return f"{name} (SH order {low})" if low == high else f"{name} (SH order {low}-{high} by exponent)"
+
+    def method_parameters(self, name: str) -> dict:
+        """tables.json's and tables.csv's record of a method: its label, and for SH-based ones the order of
+        each exponent's map and the window (sh's; fast and sht truncate plainly)."""
+        orders = self.sh_orders_used(name)
+        out: dict = {"label": self.label(name)}
+        if orders is not None:
+            out |= {"sh_order_per_exponent": orders, "sh_window": self.params.sh_window if name == "sh" else "none"}
+            if name == "sh":
+                out["sh_faithful"] = self.params.sh_faithful
+        return out
 
     def to_json(self) -> dict:
         return {
             "size": self.size,
             "exponents": self.exponents,
             "reference": {"method": "accurate", "texels": self.reference_texels, "seconds": self.reference_seconds},
+            "methods": {name: self.method_parameters(name) for name in self.errors},
             "errors_percent": self.errors,
             "seconds": self.seconds,
             "sh_orders": self.sh_orders,
+            "sh_order_study": SH_STUDY,
             "sh_mean_error_percent_by_order": self.sh_error_by_order,
         }
 
@@ -89,7 +124,7 @@ def compare(env: np.ndarray, exponents: Sequence[float], methods: Sequence[str],
     progress(f"accurate reference at {len(texels)} texels")
     start = time.perf_counter()
     reference = lobe_average_at(env, exponents, anglemap_directions(n).reshape(-1, 3)[texels])
-    result = Comparison(n, [float(s) for s in exponents], len(texels), time.perf_counter() - start)
+    result = Comparison(n, [float(s) for s in exponents], len(texels), time.perf_counter() - start, params=params)
     if len(texels) == int(anglemap_disk_mask(n).sum()):  # a full reference shows in the figure too
         full = np.zeros((len(exponents), n * n, 3), dtype=np.float32)
         full[:, texels] = reference.transpose(1, 0, 2)
@@ -119,30 +154,54 @@ def _fmt_exponent(s: float) -> str:
 
 
 def markdown_tables(c: Comparison) -> str:
-    """Tables like the thesis's 6.1-6.3: mean and max error per method and exponent, and times."""
+    """Tables like the thesis's 6.1-6.3: mean and max error per method and exponent, and times; each SH-based
+    method's row names its SH order (and sh's window), and a table gives the order of every map."""
     head = "| method | " + " | ".join(f"s={_fmt_exponent(s)}" for s in c.exponents) + " |"
     rule = "|---|" + "---|" * len(c.exponents)
     lines = [f"# Map methods against accurate ({c.size}² angle map)", "",
              f"Reference: `accurate` at {c.reference_texels} texels ({c.reference_seconds:.1f} s). Error per texel "
-             "and channel |a - v| / (a + ε), ε = 1e-4·mean(a), in percent.", "",
+             "and channel |a - v| / (a + ε), ε = 1e-4·mean(a), in percent. SH order L: bands 0..L-1.", "",
              "## Mean error (%)", "", head, rule]
     for name, errs in c.errors.items():
-        lines.append(f"| {name} | " + " | ".join(f"{e['mean']:.3f}" for e in errs) + " |")
+        lines.append(f"| {c.label(name)} | " + " | ".join(f"{e['mean']:.3f}" for e in errs) + " |")
     lines += ["", "## Max error (%)", "", head, rule]
     for name, errs in c.errors.items():
-        lines.append(f"| {name} | " + " | ".join(f"{e['max']:.2f}" for e in errs) + " |")
+        lines.append(f"| {c.label(name)} | " + " | ".join(f"{e['max']:.2f}" for e in errs) + " |")
     lines += ["", f"## Time for all {len(c.exponents)} maps", "", "| method | seconds |", "|---|---|"]
     for name, sec in c.seconds.items():
-        lines.append(f"| {name} | {sec:.2f} |")
+        lines.append(f"| {c.label(name)} | {sec:.2f} |")
+    sh_based = [name for name in c.errors if c.sh_orders_used(name) is not None]
+    if sh_based:
+        lines += ["", "## SH order of each map (bands 0..order-1)", "", head, rule]
+        for name in sh_based:
+            lines.append(f"| {c.label(name)} | " + " | ".join(str(o) for o in c.sh_orders_used(name)) + " |")
     if c.sh_orders:
-        lines += ["", "## SH mean error (%) against order", ""]
+        lines += ["", "## SH mean error (%) against order", "", f"The study: {SH_STUDY}.", ""]
         for mode, rows in c.sh_error_by_order.items():
-            lines += [f"### {mode} Y_lm", "", "| order | " + " | ".join(f"s={_fmt_exponent(s)}" for s in c.exponents) + " |",
+            lines += [f"### {mode} Y_lm", "", "| SH order | " + " | ".join(f"s={_fmt_exponent(s)}" for s in c.exponents) + " |",
                       "|---|" + "---|" * len(c.exponents)]
             for order, row in zip(c.sh_orders, rows):
                 lines.append(f"| {order} | " + " | ".join(f"{v:.3f}" for v in row) + " |")
             lines.append("")
     return "\n".join(lines) + "\n"
+
+
+CSV_COLUMNS = ("method", "label", "sh_order", "sh_window", "exponent", "mean_error_percent", "max_error_percent",
+               "seconds_all_maps")
+
+
+def csv_table(c: Comparison) -> str:
+    """tables.csv: a row per method and exponent, with the SH order of that map (empty for methods without SH)."""
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(CSV_COLUMNS)
+    for name, errs in c.errors.items():
+        record = c.method_parameters(name)
+        orders = record.get("sh_order_per_exponent", [""] * len(c.exponents))
+        for s, order, e in zip(c.exponents, orders, errs):
+            writer.writerow([name, record["label"], order, record.get("sh_window", ""), _fmt_exponent(s),
+                             f"{e['mean']:.6g}", f"{e['max']:.6g}", f"{c.seconds[name]:.4g}"])
+    return out.getvalue()
 
 
 def _save_figure(fig, path: Path) -> None:
@@ -151,19 +210,22 @@ def _save_figure(fig, path: Path) -> None:
 
 
 def figure_grid(c: Comparison, path: Path) -> None:
-    """Figure 6.4: rows = methods, columns = exponents, each map tone-mapped on its own."""
-    maps_grid(c.maps, c.exponents, path, f"Irradiance (s = 1) and reflection maps by method, {c.size}² angle maps")
+    """Figure 6.4: rows = methods (with their SH orders), columns = exponents, each map tone-mapped on its own."""
+    maps_grid({c.label(name): m for name, m in c.maps.items()}, c.exponents, path,
+              f"Irradiance (s = 1) and reflection maps by method, {c.size}² angle maps")
 
 
-def maps_grid(maps: dict[str, np.ndarray], exponents: Sequence[float], path: Path, title: str) -> None:
-    """A row per method (its (E, N, N, 3) maps), a column per exponent, each map tone-mapped on its own."""
+def maps_grid_figure(maps: dict[str, np.ndarray], exponents: Sequence[float], title: str):
+    """A row per method (its (E, N, N, 3) maps; the row's label may name its SH order), a column per exponent,
+    each map tone-mapped on its own (so the colours show each map's shape, not radiance comparable across
+    tiles: no colour bar can hold them all, and the title says so)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     names = list(maps)
-    fig, axes = plt.subplots(len(names), len(exponents), figsize=(1.6 * len(exponents), 1.7 * len(names)),
+    fig, axes = plt.subplots(len(names), len(exponents), figsize=(1.6 * len(exponents) + 1.6, 1.7 * len(names) + 0.5),
                              squeeze=False)
     for i, name in enumerate(names):
         for j, s in enumerate(exponents):
@@ -173,44 +235,80 @@ def maps_grid(maps: dict[str, np.ndarray], exponents: Sequence[float], path: Pat
             ax.set_yticks([])
             if i == 0:
                 ax.set_title(f"s = {_fmt_exponent(s)}", fontsize=9)
-            if j == 0:
-                ax.set_ylabel(name, fontsize=9)
-    fig.suptitle(title, fontsize=10)
+            if j == 0:  # horizontal, a long label wrapped before its parenthesis: rows never overlap
+                ax.set_ylabel(name.replace(" (", "\n("), fontsize=8, rotation=0, ha="right", va="center", labelpad=6)
+    fig.suptitle(f"{title}\ncolumns: Phong exponent s; each map tone-mapped on its own (Reinhard, sRGB): "
+                 "compare shapes, not brightness", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def maps_grid(maps: dict[str, np.ndarray], exponents: Sequence[float], path: Path, title: str) -> None:
+    """maps_grid_figure written to path."""
+    import matplotlib.pyplot as plt
+
+    fig = maps_grid_figure(maps, exponents, title)
     _save_figure(fig, path)
     plt.close(fig)
 
 
-def sh_order_plot(c: Comparison, path: Path) -> None:
-    """Mean error against SH order per exponent, stable (solid) and thesis-faithful (dashed)."""
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">", "h")
+
+
+def sh_order_figure(c: Comparison):
+    """Mean error against SH order per exponent (a colour and a marker each), stable Y_lm (solid, filled) and
+    thesis-faithful factorials (dashed, hollow), on log axes; the legend beside the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import NullFormatter
 
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    colours = plt.cm.viridis(np.linspace(0, 0.9, len(c.exponents)))
+    fig, ax = plt.subplots(figsize=(8.5, 4.8))
+    colours = plt.cm.tab10(np.arange(len(c.exponents)) % 10)
+    handles = []
     for k, s in enumerate(c.exponents):
+        marker = MARKERS[k % len(MARKERS)]
         for mode, style in (("stable", "-"), ("faithful", "--")):
             rows = c.sh_error_by_order.get(mode)
             if rows:
-                ax.plot(c.sh_orders, [max(r[k], 1e-6) for r in rows], style, color=colours[k], marker="o", ms=3,
-                        label=f"s={_fmt_exponent(s)}" if mode == "stable" else None)
+                ax.plot(c.sh_orders, [max(r[k], 1e-6) for r in rows], style, color=colours[k], marker=marker,
+                        ms=5 if mode == "stable" else 8, mfc=colours[k] if mode == "stable" else "none",
+                        lw=1.5 if mode == "stable" else 1.0)
+        handles.append(Line2D([], [], color=colours[k], marker=marker, label=f"s = {_fmt_exponent(s)}"))
+    handles += [Line2D([], [], color="black", ls="-", marker="o", label="stable Y_lm"),
+                Line2D([], [], color="black", ls="--", marker="o", mfc="none", ms=8, label="factorial Y_lm\n(Alg. 2.5/2.6)")]
+    if "sh" in c.errors and c.sh_orders:  # where the tables' sh row sits on this curve
+        ax.axvline(c.params.sh_order, color="tab:gray", lw=0.8, ls=":")
+        handles.append(Line2D([], [], color="tab:gray", ls=":", label=f"tables' {c.label('sh')}"))
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("SH order (bands 0..order-1)")
+    ax.set_xticks(c.sh_orders, [str(o) for o in c.sh_orders])
+    ax.xaxis.set_minor_formatter(NullFormatter())  # the orders themselves are the ticks
+    ax.set_xlabel("SH order L (bands 0..L-1)")
     ax.set_ylabel("mean error against accurate (%)")
-    ax.set_title("SH maps: stable recurrences (solid) and Alg. 2.5/2.6 factorials (dashed)", fontsize=10)
+    ax.set_title(f"sh maps against SH order, plain truncation ({c.size}² angle map)", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="Phong exponent",
+              title_fontsize=8)
+    return fig
+
+
+def sh_order_plot(c: Comparison, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = sh_order_figure(c)
     _save_figure(fig, path)
     plt.close(fig)
 
 
 def write_comparison(c: Comparison, out_dir: Path) -> list[Path]:
-    """tables.md, tables.json, methods.png and sh_order.png in out_dir; returns the paths."""
-    paths = [out_dir / "tables.md", out_dir / "tables.json"]
+    """tables.md, tables.json, tables.csv, methods.png and sh_order.png in out_dir; returns the paths."""
+    paths = [out_dir / "tables.md", out_dir / "tables.json", out_dir / "tables.csv"]
     write_text_atomic(paths[0], markdown_tables(c))
     write_text_atomic(paths[1], json.dumps(c.to_json(), indent=2) + "\n")
+    write_text_atomic(paths[2], csv_table(c))
     if c.maps:
         paths.append(out_dir / "methods.png")
         figure_grid(c, paths[-1])

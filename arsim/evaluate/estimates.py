@@ -63,9 +63,9 @@ def plot_scores(lines: list[dict], path) -> None:
             k = [f for f, _ in frames]
             top.plot(k, [100 * s["sh_error"] for _, s in frames], label=name)
             bottom.plot(k, [s["main_light_error_deg"] for _, s in frames], label=name)
-    top.set_ylabel("SH error, % of the truth's")
-    bottom.set_ylabel("main light, degrees off")
-    bottom.set_xlabel("frame of the sweep")
+    top.set_ylabel("SH error\n(% of the truth's SH norm)")
+    bottom.set_ylabel("main light's direction\nerror (degrees)")
+    bottom.set_xlabel("frame of the sweep (index)")
     top.set_title("Light estimates against the truth")
     top.legend()
     top.grid(alpha=0.3)
@@ -101,23 +101,66 @@ def sphere_figures(figures: dict, truth: np.ndarray | None, estimates: dict, giv
     return figures
 
 
-def _sphere_image(rows: dict, path) -> None:
-    import cv2
+def _srgb_encode(v: np.ndarray) -> np.ndarray:
+    v = np.clip(v, 0.0, 1.0)
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
 
-    from arsim.core.files import write_bytes_atomic
-    from arsim.core.png import png_bytes
+
+def _srgb_decode(v: np.ndarray) -> np.ndarray:
+    v = np.clip(v, 0.0, 1.0)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def sphere_figure(rows: dict):
+    """A row per light (the truth's first, where known), a column per sphere; each column on one exposure
+    (its first row's 99th percentile to 0.9), with a colour bar of the radiance each shade stands for."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import FuncNorm
+
     from arsim.evaluate.inm_compare import srgb8
+    from arsim.evaluate.spheres import ALBEDO, SILVER_EXPONENT
 
     reference = next(iter(rows.values()))  # (the truth's, where known)
     lit = [reference[k][reference[k].max(axis=-1) > 0].max(axis=-1) for k in range(3)]
     exposures = [0.9 / max(float(np.percentile(v, 99)) if v.size else 0.0, 1e-12) for v in lit]
-    lines = []
-    for name, spheres in rows.items():
-        tile = np.concatenate([srgb8(spheres[k], exposures[k]) for k in range(3)], axis=1)
-        tile = np.ascontiguousarray(np.pad(tile, ((14, 0), (0, 0), (0, 0))))
-        cv2.putText(tile, name, (2, 11), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1, cv2.LINE_AA)
-        lines.append(tile)
-    write_bytes_atomic(path, png_bytes(np.concatenate(lines, axis=0)))
+    columns = (f"diffuse (albedo {ALBEDO:g})", f"matte silver (Phong s = {SILVER_EXPONENT:g})", "mirror")
+    fig, axes = plt.subplots(len(rows), 3, figsize=(7.2, 1.75 * len(rows) + 1.3), squeeze=False, layout="constrained")
+    for i, (name, spheres) in enumerate(rows.items()):
+        for k in range(3):
+            ax = axes[i, k]
+            ax.imshow(srgb8(spheres[k], exposures[k]))
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(columns[k], fontsize=9)
+            if k == 0:
+                ax.set_ylabel(name, fontsize=9)
+    for k in range(3):  # the shade of each radiance on the column's exposure (sRGB)
+        e = exposures[k]
+        norm = FuncNorm((lambda x, e=e: _srgb_encode(np.asarray(x) * e), lambda y, e=e: _srgb_decode(np.asarray(y)) / e),
+                        vmin=0.0, vmax=1.0 / e)
+        bar = fig.colorbar(ScalarMappable(norm, cmap="gray"), ax=axes[:, k].tolist(), orientation="horizontal",
+                           fraction=0.04, pad=0.02, extend="max", label="radiance (the light's units)")
+        # ticks evenly spaced along the bar (sRGB crowds the linear ones at its bright end), two digits
+        bar.set_ticks([0.0] + [float(f"{_srgb_decode(np.array(y)) / e:.2g}") for y in (0.35, 0.7, 1.0)])
+    fig.suptitle("Three spheres seen from +z (right +x, up +y), lit by each light; a column on one exposure (sRGB)",
+                 fontsize=9)
+    return fig
+
+
+def _sphere_image(rows: dict, path) -> None:
+    import matplotlib.pyplot as plt
+
+    from arsim.core.files import atomic_path
+
+    fig = sphere_figure(rows)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100, bbox_inches="tight")
+    plt.close(fig)
 
 
 def estimate_summary(figures: dict, ar_scores: dict) -> dict:

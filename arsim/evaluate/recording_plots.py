@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from arsim.core.files import atomic_path
-from arsim.sensors.frames import frame_camera_orientations, frame_positions, recording_camera
+from arsim.sensors.frames import frame_camera_orientations, frame_positions, recording_camera, recording_scenario
 from arsim.sensors.coverage import fibonacci_directions, seen_by_views
 from arsim.sensors.fusion import tilt_error_deg, yaw_error_deg
 from arsim.sensors.recording import Recording
@@ -60,19 +60,59 @@ def plot_coverage(rec: Recording, path: Path, samples: int = 20000) -> tuple[Pat
     return _save(fig, path), coverage
 
 
-def plot_exposure(rec: Recording, path: Path) -> Path:
+def bracket_offsets(rec: Recording) -> np.ndarray:
+    """Per frame: the exposure offset (EV) it was taken at, bracket_ev[k % len] of the recording's scenario
+    (0: metered; every frame of a recording without a scenario)."""
+    bracket = recording_scenario(rec).capture.bracket_ev
+    return np.array([bracket[k % len(bracket)] for k in range(len(rec.frames))], dtype=np.float64)
+
+
+def _ev_label(ev: float) -> str:
+    return "metered (0 EV)" if ev == 0 else f"bracket {ev:+g} EV"
+
+
+def exposure_figure(rec: Recording):
+    """The exposure per frame as one series per bracket offset (the offsets alternate frame by frame, so
+    one line through all frames would fill a band): the exposure the frame got (time x ISO / base ISO), its
+    exposure time against the sensor's limits, and its ISO."""
     plt = _pyplot()
+    camera = recording_scenario(rec).device.camera
     t = np.array([f["t_ns"] for f in rec.frames]) / 1e9
-    fig, ax = plt.subplots(figsize=(9, 3.5))
-    ax.plot(t, [f["exposure_ns"] / 1e6 for f in rec.frames], color="tab:blue")
-    ax.set_yscale("log")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("exposure (ms)", color="tab:blue")
-    other = ax.twinx()
-    other.plot(t, [f["iso"] for f in rec.frames], color="tab:orange")
-    other.set_ylabel("ISO", color="tab:orange")
-    ax.set_title("Auto-exposure: exposure time and ISO per frame")
-    return _save(fig, path)
+    exposure_ms = np.array([f["exposure_ns"] for f in rec.frames]) / 1e6
+    iso = np.array([f["iso"] for f in rec.frames], dtype=np.float64)
+    offsets = bracket_offsets(rec)
+    levels = sorted(set(offsets.tolist()), key=lambda ev: (ev != 0, -ev))  # metered first, then brightest first
+    colours = dict(zip(levels, ["black", "tab:orange", "tab:blue", "tab:green", "tab:purple", "tab:red", "tab:brown"]))
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7.5), sharex=True)
+    every = len(levels)
+    for ev in levels:
+        k = offsets == ev
+        style = dict(color=colours.get(ev, "tab:gray"), lw=1.4 if ev == 0 else 0.8, marker=None if ev == 0 else ".",
+                     ms=3, label=_ev_label(ev) + (f": 1 frame in {every}" if every > 1 else ""))
+        axes[0].plot(t[k], exposure_ms[k] * iso[k] / camera.base_iso, **style)
+        axes[1].plot(t[k], exposure_ms[k], **style)
+        axes[2].plot(t[k], iso[k], **style)
+    for limit, what in ((camera.exposure_max_s, "longest"), (camera.exposure_min_s, "shortest")):
+        axes[1].axhline(1e3 * limit, color="tab:gray", ls="--", lw=0.8)
+        axes[1].annotate(f"sensor's {what} ({1e3 * limit:.3g} ms)", (1.0, 1e3 * limit), xycoords=("axes fraction", "data"),
+                         xytext=(-4, 3 if what == "shortest" else -10), textcoords="offset points", ha="right",
+                         fontsize=7, color="tab:gray")
+    axes[0].set_ylabel(f"exposure at ISO {camera.base_iso:g}\n(time x ISO / {camera.base_iso:g}, ms)")
+    axes[1].set_ylabel("exposure time (ms)")
+    axes[2].set_ylabel("ISO")
+    for ax in axes[:2]:
+        ax.set_yscale("log")
+    for ax in axes:
+        ax.grid(True, which="major", alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=len(levels), fontsize=8, frameon=False)
+    axes[0].set_title("Auto-exposure per frame: the metered exposure and the bracket around it", pad=22)
+    fig.tight_layout()
+    return fig
+
+
+def plot_exposure(rec: Recording, path: Path) -> Path:
+    return _save(exposure_figure(rec), path)
 
 
 def plot_imu(rec: Recording, path: Path) -> Path:
@@ -144,17 +184,19 @@ def plot_ar_path(rec: Recording, path: Path) -> dict:
     h = table["tag_size_m"] / 2
     top.add_patch(plt.Rectangle((-h, -h), 2 * h, 2 * h, color="black", label="tag"))
     p = frame_positions(rec)
-    top.scatter(p[:, 0], p[:, 2], c=np.where(seen, "tab:green", "tab:red"), s=4)
+    top.scatter(p[seen, 0], p[seen, 2], color="tab:green", s=4, label="camera, tag in view")
+    top.scatter(p[~seen, 0], p[~seen, 2], color="tab:red", s=4, label="camera, tag out of view")
     top.set_aspect("equal")
+    top.legend(loc="upper left", bbox_to_anchor=(0.0, -0.18), fontsize=7, ncol=2, frameon=False)
     top.set_xlabel("world x (m)")
     top.set_ylabel("world z (m)")
-    top.set_title("path from above (green: tag in view)")
+    top.set_title("path from above")
     t = np.array([f["t_ns"] for f in rec.frames]) / 1e9
     timeline.plot(t, np.linalg.norm(p, axis=1), color="tab:blue", label="distance to the tag (m)")
     timeline.fill_between(t, 0, 1, where=~seen, transform=timeline.get_xaxis_transform(), color="tab:red",
                           alpha=0.2, label="tag out of view")
     timeline.set_xlabel("time (s)")
     timeline.set_ylabel("distance (m)")
-    timeline.legend(loc="upper right", fontsize=8)
+    timeline.legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), fontsize=7, ncol=2, frameon=False)
     timeline.set_title(f"AR path: the tag in view in {100 * seen.mean():.1f} % of the frames")
     return {"file": _save(fig, path), "tag_in_view": float(seen.mean())}

@@ -17,11 +17,11 @@ import numpy as np
 
 from arsim.core.errors import ArsimError
 from arsim.lighting.accurate import DEFAULT_BOUNDS_THRESHOLD, accurate_maps, check_inputs
-from arsim.lighting.fast import fast_coefficients, fast_maps
+from arsim.lighting.fast import fast_coefficients, fast_maps, order_for_exponent
 from arsim.lighting.mc import check_samples, mc_maps
 from arsim.lighting.mipmap import mipmap_maps
 from arsim.lighting.sh import GRID_MAX_ORDER, MAX_ORDER, WINDOWS, sh_coefficients, sh_maps
-from arsim.lighting.sht import sht_map, sht_maps_from_source, sht_prepare
+from arsim.lighting.sht import bands_for_exponent, sht_map, sht_maps_from_source, sht_prepare
 
 DEFAULT_EXPONENTS = (1, 2, 10, 20, 40, 80, 160, 240, 320, 640, 1280)
 SH_ORDER = 35  # sh: bands 0..SH_ORDER-1, the thesis's order in its figures
@@ -113,6 +113,18 @@ def method(name: str) -> Method:
 def parameters_used(name: str, params: MapParameters) -> dict:
     """The parameters that matter for a method (for bake.json and reports)."""
     return {k: v for k, v in asdict(params).items() if k in method(name).parameters}
+
+
+def sh_orders_used(name: str, params: MapParameters, exponents: Sequence[float]) -> list[int] | None:
+    """The SH order (bands 0..order-1) each exponent's map is made with, for the methods that go through SH:
+    sh's --sh-order for every map, fast's and sht's the order each lobe needs; None for the others."""
+    if name == "sh":
+        return [params.sh_order] * len(exponents)
+    if name == "fast":
+        return [order_for_exponent(s) for s in exponents]
+    if name == "sht":
+        return [bands_for_exponent(float(s)) for s in exponents]
+    return None
 
 
 @dataclass(frozen=True)
