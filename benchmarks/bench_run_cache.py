@@ -4,7 +4,7 @@
 a new cache, and the same batch with --no-cache (the time the cache saved). Per run: the wall time and per
 stage computed or reused with its seconds (manifest.json).
 
-    python benchmarks/bench_run_cache.py [SCENARIO] [--work DIR]     # default: the embedded default scenario
+    python benchmarks/bench_run_cache.py [SCENARIO] [--work DIR] [--skip-batch]   # default: the embedded default scenario
 """
 
 import argparse
@@ -36,6 +36,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("scenario", nargs="?", help="a scenario file or bundled name (default: the embedded default)")
     parser.add_argument("--work", type=Path, help="folder for the runs and caches (default: a new temporary one)")
+    parser.add_argument("--skip-batch", action="store_true", help="only the cold, warm and [render] key runs")
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="bench_run_cache."))
     work.mkdir(parents=True, exist_ok=True)
@@ -49,6 +50,8 @@ def main() -> None:
         out = work / label.replace(" ", "_")
         wall = run("run", work / f"{scenario}.toml", "-o", out, "--cache", cache, "--force")
         print(f"{label}: {wall:.1f} s wall; {stages(out)}")
+    if args.skip_batch:
+        return
     wall = run("batch", *(work / f"{n}.toml" for n in variants), "-o", work / "batch", "--cache", work / "batch_cache", "--force")
     print(f"batch of {len(variants)} sharing a recording: {wall:.1f} s wall")
     for name in variants:
