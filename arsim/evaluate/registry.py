@@ -215,6 +215,7 @@ class Verdict:
     warn: float
     fail: float
     note: str = ""
+    path: str = ""  # the figure judged (the worst where several are)
 
     @property
     def status(self) -> str:
@@ -252,18 +253,19 @@ def verdicts(metrics: dict, method: str, thresholds) -> list[Verdict]:
     for stage, path, key in VERDICTS:
         pattern = path.format(method=method)
         metric = metric_for(pattern.replace("*", "1"))
-        values = [v for p, v in figures.items() if fnmatchcase(p, pattern)]
+        values = {p: v for p, v in figures.items() if fnmatchcase(p, pattern)}
         warn, fail = getattr(thresholds, key)
-        note = ""
+        note, worst = "", pattern
         if not values:
             absent = metrics.get("truth", {})
             note = "not measured" + (f": {next(iter(absent.values()))}" if absent else "")
             value = None
         else:
-            value = max(values) if metric.better != HIGHER else min(values)
+            worst = (max if metric.better != HIGHER else min)(values, key=values.get)
+            value = values[worst]
             if len(values) > 1:
                 note = f"worst of {len(values)}"
         if path == "session.flip_mean" and metrics.get("session", {}).get("lit_by_truth"):
             note = "by construction 0: the objects were lit by the true environment's own maps"
-        out.append(Verdict(stage, metric, value, warn, fail, note))
+        out.append(Verdict(stage, metric, value, warn, fail, note, worst))
     return out

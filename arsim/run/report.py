@@ -205,7 +205,7 @@ def _verdict_section(metrics: dict, scenario: Scenario, baseline: dict | None) -
         status = v.status
         value = unit_text(v.metric, v.value) if v.value is not None else "n/a"
         cells = [html.escape(v.stage), f'<span class="{status.replace("/", "")}">{status}</span>', html.escape(value),
-                 html.escape(v.metric.label) + f'<br><small>{html.escape(v.metric.meaning)}'
+                 html.escape(label_of(v.path) if v.value is not None else v.metric.label) + f'<br><small>{html.escape(v.metric.meaning)}'
                  + (f"; {html.escape(v.note)}" if v.note else "") + "</small>", html.escape(v.threshold_text())]
         if baseline is not None:
             b = next((x for x in verdicts(baseline, scenario.render.method, scenario.report) if x.metric == v.metric), None)
