@@ -337,3 +337,18 @@ def test_diff_of_two_runs_lists_every_figure_and_fails_where_one_got_worse(runs,
     # the other way round the FLIP got better: the frames are equal, nothing is worse but the time (not gated)
     assert arsim("diff", worse, runs / "a").returncode == 0
     assert arsim("diff", runs / "a", worse, "--gate-times").returncode == 1
+
+
+def test_the_summary_shows_a_baselines_figures_beside_the_runs(runs):
+    from arsim.run.report import _verdict_section
+    from arsim.scenario import load_scenario
+
+    metrics = json.loads((runs / "a" / "metrics.json").read_text())
+    baseline = json.loads(json.dumps(metrics))
+    baseline["session"]["flip_mean"] = metrics["session"]["flip_mean"] / 2  # the run got worse than the baseline
+    html = _verdict_section(metrics, load_scenario(runs / "s.toml"), baseline)
+    assert "<th>baseline</th><th>change</th>" in html
+    flip_row = next(row for row in html.split("<tr>") if "<td>AR frames</td>" in row)
+    assert "(worse)" in flip_row and f"+{metrics['session']['flip_mean'] / 2:.4g}" in flip_row
+    capture_row = next(row for row in html.split("<tr>") if "<td>capture</td>" in row)
+    assert "(worse)" not in capture_row and "+0<" in capture_row

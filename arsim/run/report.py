@@ -67,6 +67,7 @@ def plot_tracking(t: TrackingRun, frames: np.ndarray, path: Path) -> None:
             ax.fill_between(frames, 0, top, where=lost, color="tab:red", alpha=0.15, step="mid", label="tag lost")
             ax.legend(fontsize=8, loc="upper right")
     b.set_xlabel("frame of the AR path")
+    fig.suptitle("The tracked tag's pose against the truth, per frame (shaded: the tag lost, nothing drawn)", fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
