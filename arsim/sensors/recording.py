@@ -12,15 +12,19 @@ A recording folder holds:
                      a real recording has none, and what is measured against it is left out)
   ar/                the AR path ([ar] enabled): a recording of its own in the same layout (no burst),
                      its meta.json adding the table, the tag and its world corners
+  frames_not_kept.json  only where `arsim run` left the frame images out (README: Run outputs and disk):
+                     how many, their bytes and digest, and how to make them again
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
 import io
 import json
 import math
+import os
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -230,8 +234,8 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     rows = _write_frames(scenario, segment, renderer, response, mount, out_dir, progress)
     renderer.release()
 
-    write_text_atomic(out_dir / "frames.csv", _csv(["t_ns", "exposure_ns", "iso", "file"], rows))
-    write_text_atomic(out_dir / "burst.csv", _csv(["exposure_ns", "iso", "file"], burst_rows))
+    write_text_atomic(out_dir / "frames.csv", _csv(FRAMES_HEADER, rows))
+    write_text_atomic(out_dir / "burst.csv", _csv(BURST_HEADER, burst_rows))
     _write_streams(out_dir, streams, t_fused, fused, trajectory.position(t_fused / 1e9), truth)
     meta = _segment_meta(scenario, segment, camera, mount, renderer.table_light)
     write_text_atomic(out_dir / "meta.json", json.dumps(meta | extra_meta, indent=2) + "\n")
@@ -415,6 +419,95 @@ def _read_csv(path: Path, header: list[str]) -> list[list[str]]:
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
+# A recording whose frame images were left out (`arsim run` without --keep-recording): its small files stay, and
+# this file in each segment's folder says what is missing and how to make it again, byte for byte.
+NOT_KEPT = "frames_not_kept.json"
+FRAMES_HEADER = ["t_ns", "exposure_ns", "iso", "file"]
+BURST_HEADER = ["exposure_ns", "iso", "file"]
+
+
+def segment_folders(folder: Path) -> list[Path]:
+    """A recording's folder and its other segments' (the AR path's, which its meta.json names)."""
+    folders = [Path(folder)]
+    try:
+        sub = json.loads((folder / "meta.json").read_text(encoding="utf-8")).get("ar_recording")
+    except (OSError, ValueError, AttributeError):
+        sub = None
+    if isinstance(sub, str) and (folder / sub / "meta.json").is_file():
+        folders.append(folder / sub)
+    return folders
+
+
+def image_files(segment: Path) -> list[str]:
+    """The images a segment's frames.csv and burst.csv name (paths under the segment's folder)."""
+    return ([row[3] for row in _read_csv(segment / "frames.csv", FRAMES_HEADER)]
+            + [row[2] for row in _read_csv(segment / "burst.csv", BURST_HEADER)])
+
+
+def images_digest(hashes: dict[str, str]) -> str:
+    """One sha256 over images' paths and their sha256 (hashes: path -> sha256): equal for byte-identical images."""
+    h = hashlib.sha256()
+    for rel in sorted(hashes):
+        h.update(f"{rel}\0{hashes[rel]}\0".encode())
+    return h.hexdigest()
+
+
+def recording_image_paths(folder: Path) -> list[str]:
+    """Every image of a recording, its segments' frames and burst: paths under folder."""
+    return [(segment / name).relative_to(folder).as_posix() for segment in segment_folders(folder)
+            for name in image_files(segment)]
+
+
+def recording_images(folder: Path) -> dict[str, str]:
+    """Every image of a recording: path under folder -> sha256."""
+    hashes = {}
+    for rel in recording_image_paths(folder):
+        with open(folder / rel, "rb") as f:
+            hashes[rel] = hashlib.file_digest(f, "sha256").hexdigest()
+    return hashes
+
+
+def leave_out_images(folder: Path, hashes: dict[str, str], note: dict) -> dict:
+    """The recording's frame images removed (its CSVs, IMU streams, truth, meta.json and plots stay), and in each
+    segment a NOT_KEPT file saying how many, their bytes and digest, with note (what makes them again: the
+    scenario file relative to the recording's folder, under "scenario"). hashes: every image's path under folder
+    -> sha256. Returns the totals: files, bytes, sha256 (images_digest of all of them)."""
+    total = {"files": 0, "bytes": 0}
+    for segment in segment_folders(folder):
+        names = image_files(segment)
+        rels = [(segment / name).relative_to(folder).as_posix() for name in names]
+        size = sum((folder / rel).stat().st_size for rel in rels)
+        prefix = segment.relative_to(folder).as_posix()
+        up = "../" * (0 if prefix == "." else len(Path(prefix).parts))
+        record = {"files": len(rels), "bytes": size,
+                  "sha256": images_digest({name: hashes[rel] for name, rel in zip(names, rels)}),
+                  **note, "scenario": up + note["scenario"]}
+        write_text_atomic(segment / NOT_KEPT, json.dumps(record, indent=2) + "\n")
+        for rel in rels:
+            (folder / rel).unlink()
+        for sub in ("frames", "burst"):
+            if (segment / sub).is_dir() and not any((segment / sub).iterdir()):
+                (segment / sub).rmdir()
+        total["files"] += len(rels)
+        total["bytes"] += size
+    return total | {"sha256": images_digest({rel: hashes[rel] for rel in hashes})}
+
+
+def _not_kept_problem(folder: Path) -> str | None:
+    """Where a recording's images were left out by `arsim run`: what is missing and how to make it again."""
+    path = folder / NOT_KEPT
+    if not path.is_file():
+        return None
+    try:
+        note = json.loads(path.read_text(encoding="utf-8"))
+        files, size, scenario = int(note["files"]), int(note["bytes"]), str(note["scenario"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return f"{folder}: its frame images were left out ({path} says so, but cannot be read); record the scenario again"
+    where = os.path.normpath(folder / scenario)
+    return (f"{folder}: its {files} frame images ({size / 1e6:.1f} MB) were not kept by `arsim run` (they are kept with "
+            f"--keep-recording); make them again, byte-identical, with `arsim record {where} -o REC` and give REC instead")
+
+
 def _check_frame_header(path: Path, width: int, height: int) -> None:
     """A frame's PNG header read (not its pixels: `arsim info` decodes them): a PNG of the camera's size."""
     try:
@@ -478,12 +571,14 @@ def load_recording(folder: Path) -> Recording:
     check_meta(meta, folder / "meta.json")
 
     path = folder / "frames.csv"
-    rows = _read_csv(path, ["t_ns", "exposure_ns", "iso", "file"])
+    rows = _read_csv(path, FRAMES_HEADER)
     numbers = _numbers(path, rows, slice(0, 3))
     t_frames = numbers[:, 0].astype(np.int64) if len(rows) else np.zeros(0, np.int64)
     _increasing(path, t_frames, "frames")
     listed = [row[3] for row in rows]
     missing = [name for name in listed if not (folder / name).exists()]
+    if missing and (problem := _not_kept_problem(folder)) is not None:
+        raise ArsimError(problem)
     if missing:
         raise ArsimError(f"{path}: {len(missing)} listed frames are missing, first {missing[0]}; record again or drop them from frames.csv")
     extra = sorted({f"frames/{p.name}" for p in (folder / "frames").glob("*.png") if not is_temporary(p)} - set(listed))
@@ -495,7 +590,7 @@ def load_recording(folder: Path) -> Recording:
         _check_frame_header(folder / name, cam["width"], cam["height"])
 
     path = folder / "burst.csv"
-    rows = _read_csv(path, ["exposure_ns", "iso", "file"])
+    rows = _read_csv(path, BURST_HEADER)
     numbers = _numbers(path, rows, slice(0, 2))
     missing = [row[2] for row in rows if not (folder / row[2]).exists()]
     if missing:
