@@ -1073,7 +1073,8 @@ def _run_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--recording", type=_path, metavar="REC", help="replay this recording (`arsim record`) instead of recording anew")
     p.add_argument("--keep-recording", action="store_true",
                    help="keep the recording's frame images in DIR/recording (about 0.45 MB each; left out by default, "
-                        "as `arsim record DIR/scenario.toml` makes them again byte-identical)")
+                        "as `arsim record DIR/scenario.toml` makes them again byte-identical; a recording replayed with "
+                        "--recording is never copied into DIR)")
     p.add_argument("--baseline", type=_path, metavar="DIR", help="compare the run's frames with this baseline (a run directory)")
     p.add_argument("--update-baseline", action="store_true", help="write the run's frames as the baseline DIR instead of comparing")
     p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",
