@@ -297,3 +297,41 @@ def test_a_recording_names_the_bundled_assets_by_name_so_that_it_loads_with_arsi
     assert 'map = "envmaps/courtyard.exr"' in text and str(assets_dir().resolve()) not in text
     rec = load_recording(tmp_path / "rec")
     assert recording_scenario(rec).environment.map == (assets_dir() / "envmaps" / "courtyard.exr").resolve()
+
+
+def test_a_recording_without_its_images_says_so_and_how_to_make_them_again(recordings, tmp_path):
+    """sensors.recording.leave_out_images (what `arsim run` does to its recording): the images go, the small files
+    stay, each segment says what it lacks, a load names the scenario to record again; a note that cannot be
+    read still says the images were left out."""
+    import json
+    import shutil
+
+    from arsim.sensors.recording import (NOT_KEPT, images_digest, leave_out_images, recording_image_paths,
+                                         recording_images)
+
+    run = tmp_path / "run"
+    shutil.copytree(recordings["a"], run / "recording")
+    hashes = recording_images(run / "recording")
+    paths = recording_image_paths(run / "recording")
+    assert sorted(hashes) == sorted(paths) and "burst/00.png" in paths and "ar/frames/000000.png" in paths
+    total = leave_out_images(run / "recording", hashes, {"recording_key": "k", "recording_content": "c",
+                                                         "scenario": "../scenario.toml"})
+    assert total["files"] == len(paths) and total["sha256"] == images_digest(hashes)
+    assert total["bytes"] == sum((recordings["a"] / rel).stat().st_size for rel in paths)
+    assert not (run / "recording" / "frames").exists() and not (run / "recording" / "ar" / "burst").exists()
+    for name in ("meta.json", "frames.csv", "imu.csv", "groundtruth.csv", "ar/orientation.csv"):
+        assert filecmp.cmp(run / "recording" / name, recordings["a"] / name, shallow=False), name
+    ar = json.loads((run / "recording" / "ar" / NOT_KEPT).read_text())
+    assert ar["scenario"] == "../../scenario.toml" and ar["recording_key"] == "k"
+    assert ar["files"] == len([p for p in paths if p.startswith("ar/")])
+    with pytest.raises(ArsimError, match=r"its \d+ frame images .* were not kept by `arsim run`.*"
+                                         rf"arsim record {run / 'scenario.toml'} -o REC"):
+        load_recording(run / "recording")
+    with pytest.raises(ArsimError, match=rf"arsim record {run / 'scenario.toml'} -o REC"):
+        load_recording(run / "recording" / "ar")
+    (run / "recording" / NOT_KEPT).write_text("{")
+    assert_one_line_error(arsim("info", run / "recording"), "frame images were left out", "record the scenario again")
+    # the images put back (made again, or copied from the cache): the recording loads as it did
+    shutil.copytree(recordings["a"] / "frames", run / "recording" / "frames")
+    shutil.copytree(recordings["a"] / "burst", run / "recording" / "burst")
+    assert len(load_recording(run / "recording").frames) == len(load_recording(recordings["a"]).frames)
