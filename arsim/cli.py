@@ -189,7 +189,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     recording_segments(scenario)  # settings that do not fit together stop here, before any output
     with _output(args, _scenario_file(args.scenario)) as work:
-        r = recorded(scenario, work, _bar)
+        r = recorded(scenario, work, _bar, compact=args.compact)
     out = args.output
     ar = (f"; AR path: {r.summary.ar_frames} frames in {out / 'ar'}, the tag in view in {100 * r.tag_in_view:.1f} % of them"
           if r.tag_in_view is not None else "")
@@ -980,6 +980,9 @@ def _record_parser(sub: argparse._SubParsersAction) -> None:
                  "arsim record scenarios/indoor.toml -o rec")
     p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
     _output_option(p, "recording folder")
+    p.add_argument("--compact", action="store_true",
+                   help="each segment's frames in one lossless FFV1 video (frames.mkv) instead of a PNG per frame: "
+                        "the same pixels, about 0.88 of the size")
     p.set_defaults(run=cmd_record)
 
 

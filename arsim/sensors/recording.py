@@ -18,6 +18,7 @@ A recording folder holds:
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import hashlib
@@ -39,7 +40,7 @@ from arsim import __version__
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.errors import ArsimError
 from arsim.core.files import atomic_path, clear_files, is_temporary, write_text_atomic
-from arsim.core.png import png_bytes
+from arsim.core.png import VIDEO_SUFFIX, FrameVideo, frame_file, png_bytes, video_frame, video_frame_name, video_size
 from arsim.scenario import Scenario, scenario_to_toml
 from arsim.scenario.environment import load_environment
 from arsim.sensors.camera import AutoExposure, ResponseCurve, SensorSettings, noise_key
@@ -185,10 +186,12 @@ def recording_segments(scenario: Scenario) -> list[_Segment]:
     return segments
 
 
-def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] = lambda f: None) -> RecordSummary:
+def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] = lambda f: None,
+           compact: bool = False) -> RecordSummary:
     """Synthesise the capture sweep of a scenario into out_dir (created if missing) and, when [ar] is
     enabled, the AR path with the table and tag into out_dir/ar (a recording of its own). Deterministic:
-    the same scenario and seed give byte-identical files."""
+    the same scenario and seed give byte-identical files. compact: each segment's frames in one lossless video
+    (frames.mkv: core.png.FrameVideo) instead of a PNG per frame; the same pixels."""
     cam = scenario.device.camera
     segments = recording_segments(scenario)
     counts = [frame_count(s.trajectory, cam.fps) for s in segments]
@@ -200,16 +203,17 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
         done, total = sum(counts[:k]), sum(counts)
         yaw.append(_record_segment(scenario, probe, segment, out_dir / segment.folder,
                                    lambda f: progress((done + f * counts[k]) / total),
-                                   links if segment.name == "capture" else {}))
+                                   links if segment.name == "capture" else {}, compact))
     return RecordSummary(counts[0], segments[0].trajectory.duration, yaw[0], counts[1] if len(counts) > 1 else 0)
 
 
 def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, out_dir: Path,
-                    progress: Callable[[float], None], extra_meta: dict) -> float:
+                    progress: Callable[[float], None], extra_meta: dict, compact: bool = False) -> float:
     """Write one segment's files; returns the fused yaw error at its end (degrees)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "frames").mkdir(exist_ok=True)
     clear_files(out_dir / "frames", "*.png")  # an earlier recording's frames, a killed writer's temp file
+    clear_files(out_dir, "frames" + VIDEO_SUFFIX + "*")  # (an earlier compact recording's video and its checksum)
     trajectory = segment.trajectory
     camera = camera_intrinsics(scenario)
     cam = scenario.device.camera
@@ -231,7 +235,9 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     burst_views = trajectory.camera_orientation(candidates, mount)
     burst_rows = (_write_burst(out_dir, renderer, burst_views, scenario, response)
                   if segment.burst else [])
-    rows = _write_frames(scenario, segment, renderer, response, mount, out_dir, progress)
+    rows = _write_frames(scenario, segment, renderer, response, mount, out_dir, progress, compact)
+    if compact and not any((out_dir / "frames").iterdir()):
+        (out_dir / "frames").rmdir()
     renderer.release()
 
     write_text_atomic(out_dir / "frames.csv", _csv(FRAMES_HEADER, rows))
@@ -243,9 +249,10 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
 
 
 def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mount, out_dir: Path,
-                  progress: Callable[[float], None]) -> list[tuple]:
+                  progress: Callable[[float], None], compact: bool = False) -> list[tuple]:
     """The segment's frames under auto-exposure (bracketed ones at the metered exposure times 2^ev),
-    rendered and written as PNG into out_dir/frames; returns frames.csv's rows."""
+    rendered and written as PNG into out_dir/frames (compact: into the video out_dir/frames.mkv); returns
+    frames.csv's rows."""
     cam = scenario.device.camera
     sensor = SensorSettings.of(cam)
     ae = AutoExposure(sensor, response)
@@ -254,7 +261,12 @@ def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mou
     rows = []
     times = np.arange(n_frames) / cam.fps
     views, positions = trajectory.camera_orientation(times, mount), trajectory.position(times)
-    with ThreadPoolExecutor(2) as writers:  # PNG encoding releases the GIL: overlap it with rendering
+    video_name = "frames" + VIDEO_SUFFIX
+    with contextlib.ExitStack() as stack:
+        writers = stack.enter_context(ThreadPoolExecutor(2))  # PNG encoding releases the GIL: overlap it with rendering
+        video = None
+        if compact:
+            video = stack.enter_context(FrameVideo(out_dir / video_name, cam.width, cam.height, cam.fps))
         pending: deque = deque()
         for k in range(n_frames):
             used = ae.next_frame_settings()
@@ -266,11 +278,16 @@ def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mou
             frame = renderer.capture(views[k], *used, noise_key(scenario.run.seed, segment.name, k), positions[k])
             if not ev:
                 ae.update(frame, used)
-            name = f"{k:06d}.png"
-            pending.append(writers.submit(_write_png, out_dir / "frames" / name, frame))
+            if video is not None:
+                video.write(frame)
+                file = video_frame_name(video_name, k)
+            else:
+                name = f"{k:06d}.png"
+                pending.append(writers.submit(_write_png, out_dir / "frames" / name, frame))
+                file = f"frames/{name}"
             while len(pending) > MAX_PENDING_FRAMES:  # bounded: frames waiting to be written hold memory
                 pending.popleft().result()
-            rows.append((int(round(times[k] * 1e9)), int(round(used[0] * 1e9)), round(used[1], 3), f"frames/{name}"))
+            rows.append((int(round(times[k] * 1e9)), int(round(used[0] * 1e9)), round(used[1], 3), file))
             progress((k + 1) / n_frames)
         for future in pending:
             future.result()
@@ -439,9 +456,11 @@ def segment_folders(folder: Path) -> list[Path]:
 
 
 def image_files(segment: Path) -> list[str]:
-    """The images a segment's frames.csv and burst.csv name (paths under the segment's folder)."""
-    return ([row[3] for row in _read_csv(segment / "frames.csv", FRAMES_HEADER)]
-            + [row[2] for row in _read_csv(segment / "burst.csv", BURST_HEADER)])
+    """The image files a segment's frames.csv and burst.csv name (paths under the segment's folder; a compact
+    recording's video once)."""
+    names = ([row[3] for row in _read_csv(segment / "frames.csv", FRAMES_HEADER)]
+             + [row[2] for row in _read_csv(segment / "burst.csv", BURST_HEADER)])
+    return list(dict.fromkeys(frame_file(Path(name)).as_posix() for name in names))
 
 
 def images_digest(hashes: dict[str, str]) -> str:
@@ -506,6 +525,24 @@ def _not_kept_problem(folder: Path) -> str | None:
     where = os.path.normpath(folder / scenario)
     return (f"{folder}: its {files} frame images ({size / 1e6:.1f} MB) were not kept by `arsim run` (they are kept with "
             f"--keep-recording); make them again, byte-identical, with `arsim record {where} -o REC` and give REC instead")
+
+
+def _check_frames(folder: Path, names: list[str], width: int, height: int) -> None:
+    """Each frame's PNG header (_check_frame_header); a compact recording's video: its size, and a frame for
+    every index named."""
+    videos: dict[Path, int] = {}
+    for name in names:
+        found = video_frame(folder / name)
+        if found is None:
+            _check_frame_header(folder / name, width, height)
+        else:
+            videos[found[0]] = max(videos.get(found[0], -1), found[1])
+    for video, last in videos.items():
+        w, h, count = video_size(video)
+        if (w, h) != (width, height):
+            raise ArsimError(f"{video}: is {w} x {h}, the camera's frames are {width} x {height}; record again")
+        if count <= last:
+            raise ArsimError(f"{video}: holds {count} frames, the CSV names frame {last}; record again")
 
 
 def _check_frame_header(path: Path, width: int, height: int) -> None:
@@ -576,7 +613,7 @@ def load_recording(folder: Path) -> Recording:
     t_frames = numbers[:, 0].astype(np.int64) if len(rows) else np.zeros(0, np.int64)
     _increasing(path, t_frames, "frames")
     listed = [row[3] for row in rows]
-    missing = [name for name in listed if not (folder / name).exists()]
+    missing = [name for name in listed if not frame_file(folder / name).exists()]
     if missing and (problem := _not_kept_problem(folder)) is not None:
         raise ArsimError(problem)
     if missing:
@@ -586,17 +623,15 @@ def load_recording(folder: Path) -> Recording:
         raise ArsimError(f"{folder / 'frames'}: {len(extra)} frames are not in frames.csv, first {extra[0]}; remove them or list them")
     frames = [{"t_ns": int(n[0]), "exposure_ns": int(n[1]), "iso": float(n[2]), "file": f} for n, f in zip(numbers, listed)]
     cam = meta["camera"]
-    for name in listed:
-        _check_frame_header(folder / name, cam["width"], cam["height"])
+    _check_frames(folder, listed, cam["width"], cam["height"])
 
     path = folder / "burst.csv"
     rows = _read_csv(path, BURST_HEADER)
     numbers = _numbers(path, rows, slice(0, 2))
-    missing = [row[2] for row in rows if not (folder / row[2]).exists()]
+    missing = [row[2] for row in rows if not frame_file(folder / row[2]).exists()]
     if missing:
         raise ArsimError(f"{path}: {len(missing)} listed burst frames are missing, first {missing[0]}; record again")
-    for row in rows:
-        _check_frame_header(folder / row[2], cam["width"], cam["height"])
+    _check_frames(folder, [row[2] for row in rows], cam["width"], cam["height"])
     burst = [{"exposure_ns": int(n[0]), "iso": float(n[1]), "file": row[2]} for n, row in zip(numbers, rows)]
 
     path = folder / "imu.csv"
