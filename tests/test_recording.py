@@ -351,8 +351,11 @@ def test_a_compact_recording_holds_the_same_pixels_and_renders_byte_identical_fr
         assert r.returncode == 0, r.stderr
     png, compact = recordings["a"], tmp_path / "c1"
     assert not (compact / "frames").exists() and (compact / "ar" / "frames.mkv").is_file()
-    # the same seed, the same bytes (the video and its checksum too)
-    assert not filecmp.dircmp(compact, tmp_path / "c2").diff_files
+    def contents(root):
+        return {q.relative_to(root).as_posix(): q.read_bytes() for q in root.rglob("*") if q.is_file()}
+
+    # the same seed, the same bytes (the videos and their checksums too)
+    assert contents(compact) == contents(tmp_path / "c2") and "ar/frames.mkv.sha256" in contents(compact)
     for segment in ("", "ar"):
         a, b = load_recording(png / segment), load_recording(compact / segment)
         assert [f["file"] for f in b.frames] == [f"frames.mkv#{k:06d}" for k in range(len(a.frames))]
@@ -371,6 +374,12 @@ def test_a_compact_recording_holds_the_same_pixels_and_renders_byte_identical_fr
     assert frames and frames == sorted(p.name for p in (tmp_path / "render_compact" / "frames").iterdir())
     for name in [*(f"frames/{f}" for f in frames), "session.mp4"]:
         assert (tmp_path / "render_png" / name).read_bytes() == (tmp_path / "render_compact" / name).read_bytes(), name
+    # exported to EuRoC's layout (a PNG per frame): the PNG recording's export, byte for byte
+    for name, rec in (("png", png), ("compact", compact)):
+        assert arsim("export", rec, "--format", "euroc", "-o", tmp_path / f"euroc_{name}").returncode == 0
+    exported = contents(tmp_path / "euroc_png" / "mav0" / "cam0" / "data")
+    assert exported == contents(tmp_path / "euroc_compact" / "mav0" / "cam0" / "data")
+    assert len(exported) == len(load_recording(png).frames)
     # a byte changed in a video: refused in one line (FFV1's decoder alone would conceal it)
     damaged = tmp_path / "damaged"
     shutil.copytree(compact, damaged)
