@@ -384,8 +384,8 @@ def size_text(n: float) -> str:
 def disk_summary(manifest: dict, run: Path) -> str:
     """What a run takes on disk, and what of its recording it left out and how to make it again (one line)."""
     disk, frames = manifest.get("disk"), manifest.get("recording_frames")
-    if disk is None:  # (a run written before the manifest said)
-        return f"{run}: {len(manifest['files'])} files"
+    if disk is None:  # (a run written before manifests measured their disk)
+        return f"{sum(f['bytes'] for f in manifest['files']) / 1e6:.1f} MB in {len(manifest['files'])} files, manifest.json aside"
     line = f"{size_text(disk['bytes'])} in {disk['files']} files"
     if frames is not None and not frames["kept"]:
         line += (f" (recording frames not kept: {size_text(frames['bytes'])} in {frames['files']} files; regenerate them "
