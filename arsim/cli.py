@@ -125,7 +125,7 @@ def _run_info(args: argparse.Namespace) -> int:
     print(f"run {summary['run']}: scenario {summary['scenario']} (seed {summary['seed']}), complete: "
           f"{summary['files']} files, {summary['bytes'] / 1e6:.1f} MB, as manifest.json lists them")
     print(f"stages     {stages}")
-    print(f"disk       {disk_summary(manifest, args.file)}")
+    print(f"disk       {disk_summary(manifest, args.file, entry=True)}")
     print(f"session    {s['frames_total']} frames ({s['frames_lost']} with the tag lost), {_tracking_p95(s)}, "
           + ("frames not scored (the true environment is unknown)" if "flip_mean" not in s else
              "FLIP against the truth frame " + (f"{s['flip_mean']:.4f}" if s["flip_mean"] is not None else "not computed")))

@@ -210,6 +210,7 @@ def test_the_recordings_frames_are_left_out_and_made_again_byte_identical_from_t
     assert f"arsim record {out / 'scenario.toml'} -o rec" in last
     info = arsim("info", out)
     assert info.returncode == 0 and "recording frames not kept" in info.stdout, info.stdout + info.stderr
+    assert f"or copy them from the run cache's {entry})" in info.stdout
 
 
 def test_a_run_kept_its_frames_when_asked_and_was_replaced_whole_by_the_next_run_into_its_folder(runs):

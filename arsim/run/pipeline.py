@@ -381,15 +381,18 @@ def size_text(n: float) -> str:
     return f"{n / 1e6:.1f} MB" if n < 1e9 else f"{n / 1e9:.2f} GB"
 
 
-def disk_summary(manifest: dict, run: Path) -> str:
-    """What a run takes on disk, and what of its recording it left out and how to make it again (one line)."""
+def disk_summary(manifest: dict, run: Path, entry: bool = False) -> str:
+    """What a run takes on disk, and what of its recording it left out and how to make it again (one line); entry:
+    also the cache entry that holds the frames, where it still exists."""
     disk, frames = manifest.get("disk"), manifest.get("recording_frames")
     if disk is None:  # (a run written before manifests measured their disk)
         return f"{sum(f['bytes'] for f in manifest['files']) / 1e6:.1f} MB in {len(manifest['files'])} files, manifest.json aside"
     line = f"{size_text(disk['bytes'])} in {disk['files']} files"
     if frames is not None and not frames["kept"]:
         line += (f" (recording frames not kept: {size_text(frames['bytes'])} in {frames['files']} files; regenerate them "
-                 f"byte-identical with `arsim record {run / 'scenario.toml'} -o rec`)")
+                 f"byte-identical with `arsim record {run / 'scenario.toml'} -o rec`" +
+                 (f", or copy them from the run cache's {frames['cache_entry']}"
+                  if entry and frames.get("cache_entry") and Path(frames["cache_entry"]).is_dir() else "") + ")")
     return line
 
 
