@@ -109,14 +109,15 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def _run_info(args: argparse.Namespace) -> int:
-    from arsim.run.pipeline import check_run
+    from arsim.run.pipeline import check_run, disk_summary
 
     manifest = check_run(args.file)
     s = manifest["metrics"]["session"]
     summary = {"run": str(args.file), "scenario": manifest["scenario"]["name"], "seed": manifest["seed"],
                "files": len(manifest["files"]), "bytes": sum(f["bytes"] for f in manifest["files"]),
                "seconds_per_stage": manifest["seconds_per_stage"], "frames_total": s["frames_total"],
-               "frames_lost": s["frames_lost"], "flip_mean": s.get("flip_mean"), "versions": manifest["versions"]}
+               "frames_lost": s["frames_lost"], "flip_mean": s.get("flip_mean"), "versions": manifest["versions"],
+               "disk": manifest.get("disk"), "recording_frames": manifest.get("recording_frames")}
     if args.json:
         print(json_text(summary), end="")
         return 0
@@ -124,6 +125,7 @@ def _run_info(args: argparse.Namespace) -> int:
     print(f"run {summary['run']}: scenario {summary['scenario']} (seed {summary['seed']}), complete: "
           f"{summary['files']} files, {summary['bytes'] / 1e6:.1f} MB, as manifest.json lists them")
     print(f"stages     {stages}")
+    print(f"disk       {disk_summary(manifest, args.file, entry=True)}")
     print(f"session    {s['frames_total']} frames ({s['frames_lost']} with the tag lost), {_tracking_p95(s)}, "
           + ("frames not scored (the true environment is unknown)" if "flip_mean" not in s else
              "FLIP against the truth frame " + (f"{s['flip_mean']:.4f}" if s["flip_mean"] is not None else "not computed")))
@@ -187,7 +189,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     recording_segments(scenario)  # settings that do not fit together stop here, before any output
     with _output(args, _scenario_file(args.scenario)) as work:
-        r = recorded(scenario, work, _bar)
+        r = recorded(scenario, work, _bar, compact=args.compact)
     out = args.output
     ar = (f"; AR path: {r.summary.ar_frames} frames in {out / 'ar'}, the tag in view in {100 * r.tag_in_view:.1f} % of them"
           if r.tag_in_view is not None else "")
@@ -710,7 +712,7 @@ def cmd_prt_compare(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from arsim.evaluate.diff import baseline_figures, frames_of, run_diff, update_baseline
-    from arsim.run.pipeline import run_scenario
+    from arsim.run.pipeline import disk_summary, run_scenario
 
     scenario = load_scenario(args.scenario)
     if args.update_baseline and args.baseline is None:
@@ -727,7 +729,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     result = None
     baseline_metrics = baseline_figures(args.baseline) if args.baseline is not None and not args.update_baseline else None
     with _output(args, _scenario_file(args.scenario), args.recording, args.baseline) as work:
-        manifest = run_scenario(scenario, source, work, args.recording, _bar, cache, baseline_metrics)
+        manifest = run_scenario(scenario, source, work, args.recording, _bar, cache, baseline_metrics, args.keep_recording)
         if args.baseline is not None and not args.update_baseline:
             result = run_diff(args.baseline, work, work / "diff", args.max_flip)
     out = args.output
@@ -741,6 +743,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"  {name:<10} {st['status']:<8} {st['seconds']:7.2f} s  key {st['key']}  {where}")
     for why in manifest["metrics"].get("truth", {}).values():
         print(f"note: the truth is {why}")
+    print(f"run: {disk_summary(manifest, out)}")
     if args.update_baseline:
         print(f"baseline written: {update_baseline(out, args.baseline)}")
     elif result is not None:
@@ -986,6 +989,9 @@ def _record_parser(sub: argparse._SubParsersAction) -> None:
                  "arsim record scenarios/indoor.toml -o rec")
     p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
     _output_option(p, "recording folder")
+    p.add_argument("--compact", action="store_true",
+                   help="each segment's frames in one lossless FFV1 video (frames.mkv) instead of a PNG per frame: "
+                        "the same pixels, about 0.88 of the size")
     p.set_defaults(run=cmd_record)
 
 
@@ -1077,6 +1083,10 @@ def _run_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", type=_path, nargs="?", metavar="SCENARIO", help=SCENARIO_HELP)
     _output_option(p, "run directory")
     p.add_argument("--recording", type=_path, metavar="REC", help="replay this recording (`arsim record`) instead of recording anew")
+    p.add_argument("--keep-recording", action="store_true",
+                   help="keep the recording's frame images in DIR/recording (about 0.45 MB each; left out by default, "
+                        "as `arsim record DIR/scenario.toml` makes them again byte-identical; a recording replayed with "
+                        "--recording is never copied into DIR)")
     p.add_argument("--baseline", type=_path, metavar="DIR", help="compare the run's frames with this baseline (a run directory)")
     p.add_argument("--update-baseline", action="store_true", help="write the run's frames as the baseline DIR instead of comparing")
     p.add_argument("--max-flip", type=_max_flip, default=DEFAULT_MAX_FLIP, metavar="X",

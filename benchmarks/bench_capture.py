@@ -34,7 +34,8 @@ def rms_deg(estimate, truth) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="example:\n  python benchmarks/bench_capture.py --recording run/recording")
+                                     epilog="example:\n  python benchmarks/bench_capture.py --recording rec\n"
+                                            "  (rec: `arsim record -o rec`, or the recording of a run with --keep-recording)")
     parser.add_argument("--recording", type=Path, metavar="DIR", help="a recording (default: record the default sweep)")
     parser.add_argument("--align-every", type=int, help="metered frames between alignments (default: the scenario's)")
     args = parser.parse_args()

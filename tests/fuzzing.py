@@ -325,7 +325,7 @@ def command_options(inputs: dict[str, str]) -> st.SearchStrategy:
                    "--key": numbers, "--white": numbers, "--every": numbers, "--log-average": st.none(), "--overlay": st.none()},
         "profile": {"--env": path, "--budget-ms": numbers, "--tile": numbers, "--sweep": numbers,
                     "--bake": st.sampled_from(["accurate", "fast", "nope"]), "--max-frames": numbers, "--map-size": numbers},
-        "run": {"--recording": path, "--baseline": path, "--update-baseline": st.none(), "--max-flip": numbers},
+        "run": {"--recording": path, "--baseline": path, "--update-baseline": st.none(), "--keep-recording": st.none(), "--max-flip": numbers},
         "batch": {"--workers": numbers, "--ray": st.sampled_from(["auto", "127.0.0.1:1", "x", ":", "host:port"]),
                   "--baselines": path, "--max-flip": numbers},
         "validate": {},

@@ -297,3 +297,95 @@ def test_a_recording_names_the_bundled_assets_by_name_so_that_it_loads_with_arsi
     assert 'map = "envmaps/courtyard.exr"' in text and str(assets_dir().resolve()) not in text
     rec = load_recording(tmp_path / "rec")
     assert recording_scenario(rec).environment.map == (assets_dir() / "envmaps" / "courtyard.exr").resolve()
+
+
+def test_a_recording_without_its_images_says_so_and_how_to_make_them_again(recordings, tmp_path):
+    """sensors.recording.leave_out_images (what `arsim run` does to its recording): the images go, the small files
+    stay, each segment says what it lacks, a load names the scenario to record again; a note that cannot be
+    read still says the images were left out."""
+    import json
+    import shutil
+
+    from arsim.sensors.recording import (NOT_KEPT, images_digest, leave_out_images, recording_image_paths,
+                                         recording_images)
+
+    run = tmp_path / "run"
+    shutil.copytree(recordings["a"], run / "recording")
+    hashes = recording_images(run / "recording")
+    paths = recording_image_paths(run / "recording")
+    assert sorted(hashes) == sorted(paths) and "burst/00.png" in paths and "ar/frames/000000.png" in paths
+    total = leave_out_images(run / "recording", hashes, {"recording_key": "k", "recording_content": "c",
+                                                         "scenario": "../scenario.toml"})
+    assert total["files"] == len(paths) and total["sha256"] == images_digest(hashes)
+    assert total["bytes"] == sum((recordings["a"] / rel).stat().st_size for rel in paths)
+    assert not (run / "recording" / "frames").exists() and not (run / "recording" / "ar" / "burst").exists()
+    for name in ("meta.json", "frames.csv", "imu.csv", "groundtruth.csv", "ar/orientation.csv"):
+        assert filecmp.cmp(run / "recording" / name, recordings["a"] / name, shallow=False), name
+    ar = json.loads((run / "recording" / "ar" / NOT_KEPT).read_text())
+    assert ar["scenario"] == "../../scenario.toml" and ar["recording_key"] == "k"
+    assert ar["files"] == len([p for p in paths if p.startswith("ar/")])
+    with pytest.raises(ArsimError, match=r"its \d+ frame images .* were not kept by `arsim run`.*"
+                                         rf"arsim record {run / 'scenario.toml'} -o REC"):
+        load_recording(run / "recording")
+    with pytest.raises(ArsimError, match=rf"arsim record {run / 'scenario.toml'} -o REC"):
+        load_recording(run / "recording" / "ar")
+    (run / "recording" / NOT_KEPT).write_text("{")
+    assert_one_line_error(arsim("info", run / "recording"), "frame images were left out", "record the scenario again")
+    # the images put back (made again, or copied from the cache): the recording loads as it did
+    shutil.copytree(recordings["a"] / "frames", run / "recording" / "frames")
+    shutil.copytree(recordings["a"] / "burst", run / "recording" / "burst")
+    assert len(load_recording(run / "recording").frames) == len(load_recording(recordings["a"]).frames)
+
+
+def test_a_compact_recording_holds_the_same_pixels_and_renders_byte_identical_frames(recordings, tmp_path):
+    """`arsim record --compact`: each segment's frames in one lossless FFV1 video, every other file the PNG
+    recording's; deterministic; `arsim render` of it gives the PNG recording's frames byte for byte; a damaged
+    video is refused in one line."""
+    import shutil
+
+    from arsim.core.png import read_frames
+
+    (tmp_path / "a.toml").write_text(SHORT.format(seed=1))
+    for name in ("c1", "c2"):
+        r = arsim("record", tmp_path / "a.toml", "-o", tmp_path / name, "--compact")
+        assert r.returncode == 0, r.stderr
+    png, compact = recordings["a"], tmp_path / "c1"
+    assert not (compact / "frames").exists() and (compact / "ar" / "frames.mkv").is_file()
+    def contents(root):
+        return {q.relative_to(root).as_posix(): q.read_bytes() for q in root.rglob("*") if q.is_file()}
+
+    # the same seed, the same bytes (the videos and their checksums too)
+    assert contents(compact) == contents(tmp_path / "c2") and "ar/frames.mkv.sha256" in contents(compact)
+    for segment in ("", "ar"):
+        a, b = load_recording(png / segment), load_recording(compact / segment)
+        assert [f["file"] for f in b.frames] == [f"frames.mkv#{k:06d}" for k in range(len(a.frames))]
+        assert [{k: v for k, v in f.items() if k != "file"} for f in a.frames] == \
+               [{k: v for k, v in f.items() if k != "file"} for f in b.frames]
+        decoded = zip(read_frames(a.folder / f["file"] for f in a.frames), read_frames(b.folder / f["file"] for f in b.frames))
+        assert all(np.array_equal(x, y) for x, y in decoded)
+        for name in ("meta.json", "imu.csv", "orientation.csv", "groundtruth.csv", "burst.csv"):
+            assert filecmp.cmp(png / segment / name, compact / segment / name, shallow=False), name
+    size = sum(p.stat().st_size for p in (png / "frames").iterdir())
+    assert (compact / "frames.mkv").stat().st_size < size
+    for name, rec in (("png", png), ("compact", compact)):
+        r = arsim("render", rec, "-o", tmp_path / f"render_{name}")
+        assert r.returncode == 0, r.stderr
+    frames = sorted(p.name for p in (tmp_path / "render_png" / "frames").iterdir())
+    assert frames and frames == sorted(p.name for p in (tmp_path / "render_compact" / "frames").iterdir())
+    for name in [*(f"frames/{f}" for f in frames), "session.mp4"]:
+        assert (tmp_path / "render_png" / name).read_bytes() == (tmp_path / "render_compact" / name).read_bytes(), name
+    # exported to EuRoC's layout (a PNG per frame): the PNG recording's export, byte for byte
+    for name, rec in (("png", png), ("compact", compact)):
+        assert arsim("export", rec, "--format", "euroc", "-o", tmp_path / f"euroc_{name}").returncode == 0
+    exported = contents(tmp_path / "euroc_png" / "mav0" / "cam0" / "data")
+    assert exported == contents(tmp_path / "euroc_compact" / "mav0" / "cam0" / "data")
+    assert len(exported) == len(load_recording(png).frames)
+    # a byte changed in a video: refused in one line (FFV1's decoder alone would conceal it)
+    damaged = tmp_path / "damaged"
+    shutil.copytree(compact, damaged)
+    data = bytearray((damaged / "ar" / "frames.mkv").read_bytes())
+    data[len(data) // 2] ^= 1
+    (damaged / "ar" / "frames.mkv").write_bytes(bytes(data))
+    assert_one_line_error(arsim("info", damaged / "ar"), "frames.mkv: is damaged", "record again")
+    (damaged / "frames.mkv").write_bytes((damaged / "frames.mkv").read_bytes()[:1000])
+    assert_one_line_error(arsim("info", damaged), "frames.mkv")

@@ -3,12 +3,15 @@ giving byte-identical frames), visual regression (`arsim diff`, --baseline, the 
 and bad input refused in one line."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from arsim.core.files import OUTPUT_MARK
 from arsim.core.png import png_bytes
 from arsim.evaluate.diff import compare_images, run_diff
+from arsim.sensors.recording import NOT_KEPT
 from arsim.testing import assert_frames_match, update_baseline
 from tests.conftest import ENVMAPS
 from tests.test_cli import arsim, assert_one_line_error
@@ -47,18 +50,31 @@ exponent = {exponent}
 """
 
 
+def _tree(root) -> list[str]:
+    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file())
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    """A run, the same scenario replayed from its recording, and a run with the sphere's exponent changed."""
+    """A run (a; its recording's frame images not kept), its recording made again from its scenario.toml as its
+    manifest says (rec), the same scenario replayed from rec, and a run with the sphere's exponent changed
+    (changed). The folder a held a run of the changed scenario first (its frames kept: first.json says what it
+    held), which the run a replaced, reusing its recording, capture and estimates from the cache."""
     root = tmp_path_factory.mktemp("runs")
     (root / "s.toml").write_text(SMALL.format(env=ENVMAPS[1].as_posix(), exponent=80.0))
     (root / "t.toml").write_text(SMALL.format(env=ENVMAPS[1].as_posix(), exponent=10.0))
-    results = {"a": arsim("run", root / "s.toml", "-o", root / "a"),
-               "record": arsim("record", root / "s.toml", "-o", root / "rec"),
-               "changed": arsim("run", root / "t.toml", "-o", root / "changed", "--recording", root / "a" / "recording")}
+    cache = root / "cache"
+    results = {"first": arsim("run", root / "t.toml", "-o", root / "a", "--keep-recording", "--cache", cache)}
+    assert results["first"].returncode == 0, results["first"].stderr
+    (root / "first.json").write_text(json.dumps({"files": _tree(root / "a"), "stdout": results["first"].stdout,
+                                                 "manifest": json.loads((root / "a" / "manifest.json").read_text())}))
+    results["changed"] = arsim("run", root / "t.toml", "-o", root / "changed", "--recording", root / "a" / "recording")
+    results["a"] = arsim("run", root / "s.toml", "-o", root / "a", "--cache", cache)
+    results["record"] = arsim("record", root / "a" / "scenario.toml", "-o", root / "rec")
     results["replay"] = arsim("run", root / "s.toml", "-o", root / "replay", "--recording", root / "rec")
     for name, r in results.items():
         assert r.returncode == 0, (name, r.stderr)
+    (root / "a.stdout").write_text(results["a"].stdout)
     return root
 
 
@@ -138,7 +154,9 @@ def test_the_same_seed_gives_byte_identical_files_but_for_the_timed_ones(runs):
     def files(root):
         return {p.relative_to(root).as_posix(): p for p in root.rglob("*") if p.is_file()}
 
-    pairs = [(files(runs / "a" / "recording"), files(runs / "rec"))]
+    # (the run's recording lacks its frame images and says so: the next test checks them against rec's)
+    kept = {k: v for k, v in files(runs / "a" / "recording").items() if not k.endswith(NOT_KEPT)}
+    pairs = [(kept, files(runs / "rec"))]
     a, replay = files(runs / "a"), files(runs / "replay")
     pairs.append(({k: v for k, v in a.items() if not k.startswith("recording/")}, replay))
     assert set(pairs[1][0]) == set(replay)
@@ -154,13 +172,70 @@ def test_the_same_seed_gives_byte_identical_files_but_for_the_timed_ones(runs):
             if name.endswith(".json"):
                 x, y = json.loads(first[name].read_text()), json.loads(second[name].read_text())
                 if name == "manifest.json":  # a replay's manifest names its recording, which lies outside it
-                    for m in (x, y):  # (and its stages: no recording, the capture keyed by that recording's content)
+                    for m in (x, y):  # (and its stages: no recording, the capture keyed by that recording's content;
+                        # a's took stages from a cache, the replay used none)
                         m["files"] = [f for f in m["files"] if not f["path"].startswith("recording")]
-                        m.pop("recording")
-                        m.pop("stages")
+                        for key in ("recording", "stages", "cache", "recording_frames", "disk"):
+                            m.pop(key)
                 keys = _json_differences(x, y)
                 assert keys and all(timed.search(k) for k in keys), (name, sorted(k for k in keys if not timed.search(k)))
-    assert "frames/000000.png" not in differing and "capture/env.exr" not in differing and len(a) > 100
+    assert "frames/000000.png" not in differing and "capture/env.exr" not in differing and len(a) > 50
+
+
+def test_the_recordings_frames_are_left_out_and_made_again_byte_identical_from_the_scenario(runs):
+    """A run keeps its recording's small files, not its frame images; its manifest counts them and gives their
+    digest, which `arsim record RUN/scenario.toml` (what the manifest and the run's last line say to run) matches."""
+    from arsim.sensors.recording import images_digest, recording_image_paths, recording_images
+
+    out, rec = runs / "a", runs / "rec"
+    manifest = json.loads((out / "manifest.json").read_text())
+    frames = manifest["recording_frames"]
+    images = recording_images(rec)
+    assert len(images) == 11 + 13 + 41  # the sweep's 1 s at 10 frames/s, the burst, the AR path's 4 s
+    assert frames["kept"] is False and frames["files"] == len(images) and frames["sha256"] == images_digest(images)
+    assert frames["bytes"] == sum((rec / rel).stat().st_size for rel in images)
+    assert not any(p.suffix == ".png" and p.parent.name in ("frames", "burst") for p in (out / "recording").rglob("*"))
+    assert all(not (out / "recording" / rel).exists() for rel in recording_image_paths(rec))
+    for segment, count in (("", 11 + 13), ("ar", 41)):
+        note = json.loads((out / "recording" / segment / NOT_KEPT).read_text())
+        assert note["files"] == count and note["recording_key"] == manifest["stages"]["recording"]["key"]
+    # the frames are still in the cache entry the run took its recording from (until the cache drops it)
+    entry = Path(frames["cache_entry"])
+    assert entry.parent.parent == Path(manifest["stages"]["recording"]["from"]) and (entry / "ar" / "frames").is_dir()
+    # the disk the run takes: every file of the folder (but the mark of arsim's output), the manifest included
+    on_disk = [p for p in out.rglob("*") if p.is_file() and p.name != OUTPUT_MARK]
+    assert manifest["disk"] == {"files": len(on_disk), "bytes": sum(p.stat().st_size for p in on_disk)}
+    last = (runs / "a.stdout").read_text().splitlines()[-1]
+    assert last.startswith(f"run: {manifest['disk']['bytes'] / 1e6:.1f} MB in {len(on_disk)} files (recording frames not kept")
+    assert f"arsim record {out / 'scenario.toml'} -o rec" in last
+    info = arsim("info", out)
+    assert info.returncode == 0 and "recording frames not kept" in info.stdout, info.stdout + info.stderr
+    assert f"or copy them from the run cache's {entry})" in info.stdout
+
+
+def test_a_run_kept_its_frames_when_asked_and_was_replaced_whole_by_the_next_run_into_its_folder(runs):
+    first = json.loads((runs / "first.json").read_text())
+    frames = first["manifest"]["recording_frames"]
+    assert frames["kept"] is True and frames["files"] == 11 + 13 + 41
+    assert "recording/ar/frames/000000.png" in first["files"] and "recording/burst/00.png" in first["files"]
+    assert "recording frames not kept" not in first["stdout"].splitlines()[-1]
+    # the first run (exponent 10) wrote a map of exponent 10 and the recording's frames; the second (exponent
+    # 80) into the same folder neither: what only the first wrote is gone, not left beside the second's files
+    only_first = set(first["files"]) - set(_tree(runs / "a"))
+    assert "maps/mipmap/reflection_s10.exr" in only_first and "recording/frames/000000.png" in only_first
+    assert not (runs / "a" / "maps" / "mipmap" / "reflection_s10.exr").exists()
+    assert {p["path"] for p in json.loads((runs / "a" / "manifest.json").read_text())["files"]} == set(_tree(runs / "a")) - {
+        "manifest.json", OUTPUT_MARK}
+    assert not list(runs.glob(".a.*"))  # no temporary or old folder left beside it
+
+
+def test_a_runs_recording_without_its_frames_says_how_to_make_them_again(runs, tmp_path):
+    how = f"arsim record {runs / 'a' / 'scenario.toml'} -o REC"
+    r = arsim("run", runs / "s.toml", "-o", tmp_path / "o", "--recording", runs / "a" / "recording")
+    assert_one_line_error(r, "frame images", "were not kept by `arsim run`", "--keep-recording", how)
+    assert not (tmp_path / "o").exists()
+    assert_one_line_error(arsim("info", runs / "a" / "recording"), "were not kept", how)
+    assert_one_line_error(arsim("capture", runs / "a" / "recording", "-o", tmp_path / "c"), "were not kept", how)
 
 
 def test_diff_of_a_run_against_itself_passes_with_flip_zero(runs, tmp_path):
@@ -186,7 +261,7 @@ def test_diff_against_a_changed_exponent_fails_and_lights_up_that_object_only(ru
     for frame in summary["per_frame"]:
         name = frame["name"]
         a, b = read_frame(runs / "a" / "frames" / name), read_frame(runs / "changed" / "frames" / name)
-        camera = read_frame(runs / "a" / "recording" / "ar" / "frames" / name)
+        camera = read_frame(runs / "rec" / "ar" / "frames" / name)  # (the run's recording: without its frames)
         objects = cv2.dilate((a != camera).any(axis=-1).astype(np.uint8), np.ones((9, 9), np.uint8))
         count, labels = cv2.connectedComponents(objects)
         _, error = compare_images(a, b)

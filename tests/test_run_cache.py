@@ -277,3 +277,40 @@ def test_a_batch_passes_its_cache_to_each_run(tmp_path):
     assert "--cache" not in base and "--no-cache" not in base  # the default cache
     assert run_command(Path("s.toml"), tmp_path, None, 0.0, "off")[-1] == "--no-cache"
     assert run_command(Path("s.toml"), tmp_path, None, 0.0, "/c")[-2:] == ["--cache", "/c"]
+
+
+def test_a_recordings_frames_are_borrowed_from_the_entry_never_copied(tmp_path, monkeypatch):
+    """A run leaves its recording's frame images out at its end: restored from an entry on another file system
+    (no hard link), they are symbolic links into the entry, where the other outputs are copies."""
+    import errno
+    import os
+
+    cache = StageCache(tmp_path / "c")
+    run = tmp_path / "run"
+    (run / "recording" / "frames").mkdir(parents=True)
+    (run / "recording" / "frames" / "000000.png").write_bytes(b"png")
+    (run / "recording" / "frames.csv").write_text("t_ns,exposure_ns,iso,file\n")
+    cache.store("recording", "k", run, ["recording/frames/000000.png", "recording/frames.csv"])
+
+    def across_file_systems(source, target):
+        raise OSError(errno.EXDEV, "Invalid cross-device link")
+
+    monkeypatch.setattr(os, "link", across_file_systems)
+    out = tmp_path / "out"
+    cache.restore(cache.lookup("recording", "k"), out, lambda rel: rel.endswith(".png"))
+    frame, csv = out / "recording" / "frames" / "000000.png", out / "recording" / "frames.csv"
+    assert frame.is_symlink() and frame.resolve() == (tmp_path / "c" / "recording" / "k" / "files" / "recording" / "frames"
+                                                       / "000000.png").resolve() and frame.read_bytes() == b"png"
+    assert not csv.is_symlink() and csv.read_text() == "t_ns,exposure_ns,iso,file\n"
+
+
+def test_the_manifests_disk_counts_every_file_and_itself(tmp_path):
+    from arsim.run.pipeline import FILE_ROLES, _files_under, _write_manifest
+
+    (tmp_path / "capture").mkdir()
+    (tmp_path / "capture" / "env.exr").write_bytes(bytes(999_995))  # the manifest's size crosses into 7 digits
+    manifest = {"files": _files_under(tmp_path, FILE_ROLES)}
+    _write_manifest(tmp_path, manifest)
+    written = json.loads((tmp_path / "manifest.json").read_text())
+    sizes = [p.stat().st_size for p in tmp_path.rglob("*") if p.is_file()]
+    assert written["disk"] == {"files": 2, "bytes": sum(sizes)} and sum(sizes) > 10**6

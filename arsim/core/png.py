@@ -13,7 +13,10 @@ on standard error for a corrupted file, which would break a refusal's one line.
 from __future__ import annotations
 
 import collections
+import hashlib
+import os
 import struct
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -23,6 +26,11 @@ import numpy as np
 from isal import isal_zlib
 
 from arsim.core.errors import ArsimError
+from arsim.core.files import atomic_path, write_text_atomic
+
+# FFmpeg's own messages (through OpenCV) off: a damaged video is refused in arsim's one line, not FFmpeg's many.
+# (Read by OpenCV when it first opens a video.)
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SUB_FILTER = 1
@@ -124,9 +132,170 @@ def png_problem(data: bytes) -> str | None:
     return None
 
 
+# ---------------------------------------------------------------------------------------------------
+# Frames in one lossless video (a compact recording, `arsim record --compact`): FFV1 in Matroska, each frame
+# intra-coded, written through PyAV with FFmpeg's bitexact flags (the same frames give the same bytes: OpenCV's
+# writer stamps a random segment id) and read through OpenCV. A frame is named VIDEO#index, index from 0.
+
+VIDEO_SUFFIX = ".mkv"
+
+
+def video_frame_name(video: str, index: int) -> str:
+    """How a recording's CSV names frame `index` of the video file `video` (a path under the recording)."""
+    return f"{video}#{index:06d}"
+
+
+def video_frame(path: str | Path) -> tuple[Path, int] | None:
+    """(the video file, the frame's index) where path names a frame in a video (video_frame_name), else None."""
+    path = Path(path)
+    stem, sep, index = path.name.partition("#")
+    if sep and stem.endswith(VIDEO_SUFFIX) and index.isdigit():
+        return path.with_name(stem), int(index)
+    return None
+
+
+def frame_file(path: str | Path) -> Path:
+    """The file holding a frame: the video for a frame in a video, else the path itself."""
+    found = video_frame(path)
+    return found[0] if found is not None else Path(path)
+
+
+class FrameVideo:
+    """Frames (H, W, 3) uint8 RGB into a lossless FFV1 video at `path`, as a context manager: written under a
+    temporary name, renamed into place when the block ends without an error, with its sha256 beside it
+    (`path`.sha256, as sha256sum writes it) which every reader checks: FFV1's decoder conceals damage where a
+    PNG's CRC fails. Every pixel decodes as written."""
+
+    def __init__(self, path: Path, width: int, height: int, fps: float):
+        self.path, self._size, self._rate = Path(path), (width, height), fps
+
+    def __enter__(self) -> "FrameVideo":
+        try:
+            import av
+        except ImportError:
+            raise ArsimError("compact recordings need PyAV: pip install av") from None
+        from fractions import Fraction
+
+        self._atomic = atomic_path(self.path)
+        self._tmp = self._atomic.__enter__()
+        rate = Fraction(self._rate).limit_denominator(1000)
+        self._container = av.open(str(self._tmp), "w", format="matroska", options={"fflags": "+bitexact"})
+        self._stream = self._container.add_stream("ffv1", rate=rate, options={"flags": "+bitexact"})
+        self._stream.width, self._stream.height = self._size
+        self._stream.pix_fmt = "bgr0"  # (lossless RGB: FFV1's encoder takes no packed rgb24)
+        self._stream.codec_context.time_base = 1 / rate
+        self._frames, self._av = 0, av
+        return self
+
+    def write(self, frame: np.ndarray) -> None:
+        picture = self._av.VideoFrame.from_ndarray(np.ascontiguousarray(frame[..., :3]), format="rgb24")
+        picture.pts, picture.time_base = self._frames, self._stream.codec_context.time_base
+        for packet in self._stream.encode(picture):
+            self._container.mux(packet)
+        self._frames += 1
+
+    def __exit__(self, kind, value, traceback) -> None:
+        digest = None
+        try:
+            if kind is None:
+                for packet in self._stream.encode():
+                    self._container.mux(packet)
+            self._container.close()
+            if kind is None:
+                digest = _sha256(self._tmp)
+        finally:
+            self._atomic.__exit__(kind, value, traceback)  # (renamed into place, or removed)
+        if digest is not None:
+            write_text_atomic(checksum_file(self.path), f"{digest}  {self.path.name}\n")
+
+
+def checksum_file(video: Path) -> Path:
+    return video.with_name(video.name + ".sha256")
+
+
+def _sha256(path: Path) -> str:
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
+_checked: dict[tuple, None] = {}  # videos (path, size, time) whose sha256 matched, in this process
+_checked_lock = threading.Lock()
+
+
+def _check_video(video: Path) -> None:
+    """A frame video against the sha256 written beside it, once per process (and again where it changed)."""
+    stat = video.stat()
+    tag = (str(video.resolve()), stat.st_size, stat.st_mtime_ns)
+    with _checked_lock:
+        if tag in _checked:
+            return
+    sums = checksum_file(video)
+    try:
+        expected = sums.read_text(encoding="utf-8").split()[0]
+    except (OSError, UnicodeDecodeError, IndexError):
+        raise ArsimError(f"{video}: its checksum {sums.name} is missing or unreadable; record again") from None
+    if _sha256(video) != expected:
+        raise ArsimError(f"{video}: is damaged (its sha256 is not the one {sums.name} gives); record again")
+    with _checked_lock:
+        _checked[tag] = None
+
+
+def video_size(path: Path) -> tuple[int, int, int]:
+    """(width, height, frames) of a frame video; ArsimError where it cannot be opened."""
+    capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    if not capture.isOpened():
+        raise ArsimError(f"{path}: cannot be opened as a video; record again")
+    try:
+        return (int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT)),
+                int(capture.get(cv2.CAP_PROP_FRAME_COUNT)))
+    finally:
+        capture.release()
+
+
+class _OpenVideos(threading.local):
+    """Per thread, each video opened once and the index of the frame it reads next (reading in order never seeks)."""
+
+    def __init__(self):
+        self.videos: dict[Path, list] = {}
+
+
+_open_videos = _OpenVideos()
+
+
+def _read_video_frame(video: Path, index: int) -> np.ndarray:
+    entry = _open_videos.videos.get(video)
+    if entry is None:
+        if not video.is_file():
+            raise ArsimError(f"{video}: missing (a compact recording's frames); record again")
+        _check_video(video)
+        capture = cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)
+        if not capture.isOpened():
+            raise ArsimError(f"{video}: cannot be opened as a video; record again")
+        entry = _open_videos.videos[video] = [capture, 0]
+    capture, following = entry
+    if index != following:
+        capture.set(cv2.CAP_PROP_POS_FRAMES, index)  # (FFV1 frames are all key frames: exact)
+    ok, image = capture.read()
+    if not ok:
+        entry[1] = -1
+        raise ArsimError(f"{video}: frame {index} cannot be decoded; record again")
+    entry[1] = index + 1
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def png_of_frame(path: Path) -> bytes:
+    """A frame as PNG file bytes: a PNG's own, a video's frame encoded as a recording writes it (png_bytes)."""
+    found = video_frame(path)
+    return Path(path).read_bytes() if found is None else png_bytes(_read_video_frame(*found))
+
+
 def read_frame(path: Path, check: bool = True) -> np.ndarray:
-    """(H, W, 3) uint8 RGB of an 8-bit image file (a recording's frame, a run's rendered frame). check=False
-    leaves out png_problem, for a file this process has read and checked before."""
+    """(H, W, 3) uint8 RGB of an 8-bit image file (a recording's frame, a run's rendered frame), or of a frame in
+    a video (video_frame_name). check=False leaves out png_problem, for a file this process has read and checked
+    before."""
+    found = video_frame(path)
+    if found is not None:
+        return _read_video_frame(*found)
     data = Path(path).read_bytes()
     problem = png_problem(data) if check else None
     if problem is not None:
@@ -143,6 +312,9 @@ def read_frames(paths: Iterable[Path], workers: int = 2, ahead: int = 8, check: 
     release the GIL, so they overlap the caller's work), at most `ahead` frames held at once."""
     from concurrent.futures import ThreadPoolExecutor
 
+    paths = list(paths)
+    if paths and video_frame(paths[0]) is not None:
+        workers = 1  # (a video is decoded in order, by one thread: no seeking)
     pending = collections.deque()
     with ThreadPoolExecutor(workers) as pool:
         for path in paths:

@@ -314,12 +314,21 @@ class StageCache:
         os.utime(folder / ENTRY)  # (recently used: pruned last)
         return Hit(folder, {rel: f["sha256"] for rel, f in listed.items()})
 
-    def restore(self, hit: Hit, out: Path) -> None:
-        """The entry's outputs linked (or copied) into the run directory."""
+    def restore(self, hit: Hit, out: Path, borrowed=lambda rel: False) -> None:
+        """The entry's outputs linked (or copied) into the run directory. Those borrowed(path) holds for are read
+        while the run works and left out of it at its end (a recording's frames): never copied, a symbolic link
+        into the entry where a hard link cannot be made (another file system)."""
         for rel in hit.outputs:
             target = out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
-            _link_or_copy(hit.folder / "files" / rel, target)
+            if borrowed(rel):
+                target.unlink(missing_ok=True)
+                try:
+                    os.link(hit.folder / "files" / rel, target)
+                except OSError:
+                    os.symlink(hit.folder / "files" / rel, target)
+            else:
+                _link_or_copy(hit.folder / "files" / rel, target)
 
     def store(self, stage: str, key: str, out: Path, outputs: list[str], state=None) -> Path | None:
         """A new entry: the outputs (paths in out) copied, state(folder) writing what later stages need; written

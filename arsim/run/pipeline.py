@@ -255,17 +255,17 @@ class _Stages:
         self.cache, self.out, self.step, self.seconds = cache, out, step, seconds
         self.record: dict[str, dict] = {}
 
-    def run(self, name: str, key: str, description: str, compute, save=None, load=None):
+    def run(self, name: str, key: str, description: str, compute, save=None, load=None, borrowed=lambda rel: False):
         """(value, {output path: sha256}) of the stage: load(state folder) of the entry where the key matches
-        (its outputs copied into the run), else compute() (its outputs: what it wrote into the run),
-        stored with save(value, state folder)."""
+        (its outputs copied into the run, those borrowed(path) holds for linked: cache.StageCache.restore), else
+        compute() (its outputs: what it wrote into the run), stored with save(value, state folder)."""
         with self.cache.lock(name, key):
             start = time.perf_counter()
             hit = self.cache.lookup(name, key)  # (its files' hashes checked: part of the stage's time)
             self.seconds[name] = round(self.seconds.get(name, 0.0) + time.perf_counter() - start, 2)
             if hit is not None:
                 with self.step(name, f"{description} (reused)"):
-                    self.cache.restore(hit, self.out)
+                    self.cache.restore(hit, self.out, borrowed)
                     value = load(hit.state) if load is not None else None
                 self.record[name] = {"status": "reused", "key": key, "from": str(hit.folder)}
                 return value, hit.outputs
@@ -351,11 +351,71 @@ def _load_session(folder: Path) -> dict:
     return {"frames": a["frames"], "tracking": tracking, "figures": data["figures"], "estimate_scores": data["estimate_scores"]}
 
 
+def _is_image(rel: str) -> bool:
+    """A recording's frame image by its path (recording/frames/*.png, recording/burst/*.png, recording/ar/frames/...)."""
+    path = Path(rel)
+    return path.suffix == ".png" and path.parent.name in ("frames", "burst")
+
+
+def _recording_frames(folder: Path, hashes: dict[str, str], key: str, content: str, keep: bool,
+                      entry: str | None) -> dict:
+    """The manifest's account of the recording's frame images: kept, or left out (sensors.recording.leave_out_images)
+    with what makes them again byte-identical: `arsim record` of the run's scenario.toml (the recording stage's key
+    names the same recording), or the cache entry while it exists."""
+    from arsim.sensors.recording import images_digest, leave_out_images, recording_image_paths
+
+    images = {rel: hashes[rel] for rel in recording_image_paths(folder)}
+    if keep:
+        return {"kept": True, "files": len(images), "bytes": sum((folder / rel).stat().st_size for rel in images),
+                "sha256": images_digest(images)}
+    totals = leave_out_images(folder, images, {"recording_key": key, "recording_content": content,
+                                               "scenario": "../scenario.toml"})
+    frames = Path(entry) / "files" / "recording" if entry is not None else None
+    return {"kept": False, **totals, "recording_key": key, "recording_content": content,
+            "regenerate": "arsim record scenario.toml -o REC (in the run's folder)",
+            "cache_entry": str(frames) if frames is not None and frames.is_dir() else None}
+
+
+def size_text(n: float) -> str:
+    """Bytes as people read them: MB below a gigabyte, else GB (powers of ten, as du -h --si)."""
+    return f"{n / 1e6:.1f} MB" if n < 1e9 else f"{n / 1e9:.2f} GB"
+
+
+def disk_summary(manifest: dict, run: Path, entry: bool = False) -> str:
+    """What a run takes on disk, and what of its recording it left out and how to make it again (one line); entry:
+    also the cache entry that holds the frames, where it still exists."""
+    disk, frames = manifest.get("disk"), manifest.get("recording_frames")
+    if disk is None:  # (a run written before manifests measured their disk)
+        return f"{sum(f['bytes'] for f in manifest['files']) / 1e6:.1f} MB in {len(manifest['files'])} files, manifest.json aside"
+    line = f"{size_text(disk['bytes'])} in {disk['files']} files"
+    if frames is not None and not frames["kept"]:
+        line += (f" (recording frames not kept: {size_text(frames['bytes'])} in {frames['files']} files; regenerate them "
+                 f"byte-identical with `arsim record {run / 'scenario.toml'} -o rec`" +
+                 (f", or copy them from the run cache's {frames['cache_entry']}"
+                  if entry and frames.get("cache_entry") and Path(frames["cache_entry"]).is_dir() else "") + ")")
+    return line
+
+
+def _write_manifest(out: Path, manifest: dict) -> None:
+    """manifest.json, its "disk" counting every file of the run listed and the manifest itself."""
+    listed = sum(f["bytes"] for f in manifest["files"])
+    own = 0
+    for _ in range(8):  # (the manifest's size is in it: a few rounds settle its digits)
+        manifest["disk"] = {"files": len(manifest["files"]) + 1, "bytes": listed + own}
+        text = json_text(manifest)
+        if len(text.encode("utf-8")) == own:
+            break
+        own = len(text.encode("utf-8"))
+    write_text_atomic(out / "manifest.json", text)
+
+
 def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | None = None,
-                 stage: Callable = quiet_stage, cache: StageCache | None = None, baseline: dict | None = None) -> dict:
+                 stage: Callable = quiet_stage, cache: StageCache | None = None, baseline: dict | None = None,
+                 keep_recording: bool = False) -> dict:
     """Run every stage into out, each reused from the cache where its key matches (README: The run cache);
     returns the manifest (also written to out/manifest.json). baseline: a baseline run's metrics.json, whose
-    figures the report shows beside the run's."""
+    figures the report shows beside the run's. The recording made (or reused) is read where it lies while the run
+    works; its frame images are left out of out at the end unless keep_recording (README: Run outputs and disk)."""
     from arsim.capture.pipeline import CaptureSettings, recording_scenario
     from arsim.evaluate.diff import masked_flip
     from arsim.evaluate.estimates import estimate_summary, write_estimate_frames
@@ -399,7 +459,8 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
             with step("recording", description) as update:
                 record(scenario, out / "recording", progress=lambda f: update(completed=f))
 
-        _, hashes = stages.run("recording", recording_key(scenario), "1/6 recording the sweep and the AR path", make_recording)
+        _, hashes = stages.run("recording", recording_key(scenario), "1/6 recording the sweep and the AR path", make_recording,
+                               borrowed=lambda rel: not keep_recording and _is_image(rel))
         if stages.record["recording"]["status"] == "reused":
             _with_scenario_toml(out / "recording", scenario)
         recording = out / "recording"
@@ -524,6 +585,10 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
                          baked["truth_maps"] if truth is not None else None, baseline)
 
     stages.run("report", keys["report"], "6/6 writing the report", make_report)
+    frames = None  # (a replayed recording lies outside the run: nothing of it to keep or leave out)
+    if recording == out / "recording":
+        made = stages.record["recording"]
+        frames = _recording_frames(recording, hashes, made["key"], content, keep_recording, made["from"] or made.get("stored"))
     for name, s in stages.record.items():
         s["seconds"] = seconds.get(name, 0.0)
     manifest = {
@@ -535,9 +600,11 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         "stages": stages.record,
         "cache": str(cache.root) if cache.root is not None else None,
         "metrics": metrics,
+        "recording_frames": frames,
+        "disk": None,  # (_write_manifest)
         "files": _files_under(out, FILE_ROLES),
     }
-    write_text_atomic(out / "manifest.json", json_text(manifest))
+    _write_manifest(out, manifest)
     return manifest
 
 

@@ -57,10 +57,11 @@ class PlottedRecording:
 
 
 def recorded(scenario: Scenario, out: Path, stage: Stage = quiet_stage,
-             description: str = "recording the capture sweep and the AR path") -> PlottedRecording:
-    """The scenario recorded into out (the sweep; its AR path into out/ar), with the plots in out/plots."""
+             description: str = "recording the capture sweep and the AR path", compact: bool = False) -> PlottedRecording:
+    """The scenario recorded into out (the sweep; its AR path into out/ar), with the plots in out/plots; compact:
+    the frames in lossless videos (sensors.recording.record)."""
     with stage(description) as update:
-        summary = record(scenario, out, progress=lambda f: update(completed=f))
+        summary = record(scenario, out, progress=lambda f: update(completed=f), compact=compact)
     plots = plot_recording(load_recording(out), out / "plots")
     tag = None
     if summary.ar_frames:

@@ -12,15 +12,20 @@ A recording folder holds:
                      a real recording has none, and what is measured against it is left out)
   ar/                the AR path ([ar] enabled): a recording of its own in the same layout (no burst),
                      its meta.json adding the table, the tag and its world corners
+  frames_not_kept.json  only where `arsim run` left the frame images out (README: Run outputs and disk):
+                     how many, their bytes and digest, and how to make them again
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
+import hashlib
 import io
 import json
 import math
+import os
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -35,7 +40,7 @@ from arsim import __version__
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.errors import ArsimError
 from arsim.core.files import atomic_path, clear_files, is_temporary, write_text_atomic
-from arsim.core.png import png_bytes
+from arsim.core.png import VIDEO_SUFFIX, FrameVideo, frame_file, png_bytes, video_frame, video_frame_name, video_size
 from arsim.scenario import Scenario, scenario_to_toml
 from arsim.scenario.environment import load_environment
 from arsim.sensors.camera import AutoExposure, ResponseCurve, SensorSettings, noise_key
@@ -181,10 +186,12 @@ def recording_segments(scenario: Scenario) -> list[_Segment]:
     return segments
 
 
-def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] = lambda f: None) -> RecordSummary:
+def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] = lambda f: None,
+           compact: bool = False) -> RecordSummary:
     """Synthesise the capture sweep of a scenario into out_dir (created if missing) and, when [ar] is
     enabled, the AR path with the table and tag into out_dir/ar (a recording of its own). Deterministic:
-    the same scenario and seed give byte-identical files."""
+    the same scenario and seed give byte-identical files. compact: each segment's frames in one lossless video
+    (frames.mkv: core.png.FrameVideo) instead of a PNG per frame; the same pixels."""
     cam = scenario.device.camera
     segments = recording_segments(scenario)
     counts = [frame_count(s.trajectory, cam.fps) for s in segments]
@@ -196,16 +203,17 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
         done, total = sum(counts[:k]), sum(counts)
         yaw.append(_record_segment(scenario, probe, segment, out_dir / segment.folder,
                                    lambda f: progress((done + f * counts[k]) / total),
-                                   links if segment.name == "capture" else {}))
+                                   links if segment.name == "capture" else {}, compact))
     return RecordSummary(counts[0], segments[0].trajectory.duration, yaw[0], counts[1] if len(counts) > 1 else 0)
 
 
 def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, out_dir: Path,
-                    progress: Callable[[float], None], extra_meta: dict) -> float:
+                    progress: Callable[[float], None], extra_meta: dict, compact: bool = False) -> float:
     """Write one segment's files; returns the fused yaw error at its end (degrees)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "frames").mkdir(exist_ok=True)
     clear_files(out_dir / "frames", "*.png")  # an earlier recording's frames, a killed writer's temp file
+    clear_files(out_dir, "frames" + VIDEO_SUFFIX + "*")  # (an earlier compact recording's video and its checksum)
     trajectory = segment.trajectory
     camera = camera_intrinsics(scenario)
     cam = scenario.device.camera
@@ -227,11 +235,13 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     burst_views = trajectory.camera_orientation(candidates, mount)
     burst_rows = (_write_burst(out_dir, renderer, burst_views, scenario, response)
                   if segment.burst else [])
-    rows = _write_frames(scenario, segment, renderer, response, mount, out_dir, progress)
+    rows = _write_frames(scenario, segment, renderer, response, mount, out_dir, progress, compact)
+    if compact and not any((out_dir / "frames").iterdir()):
+        (out_dir / "frames").rmdir()
     renderer.release()
 
-    write_text_atomic(out_dir / "frames.csv", _csv(["t_ns", "exposure_ns", "iso", "file"], rows))
-    write_text_atomic(out_dir / "burst.csv", _csv(["exposure_ns", "iso", "file"], burst_rows))
+    write_text_atomic(out_dir / "frames.csv", _csv(FRAMES_HEADER, rows))
+    write_text_atomic(out_dir / "burst.csv", _csv(BURST_HEADER, burst_rows))
     _write_streams(out_dir, streams, t_fused, fused, trajectory.position(t_fused / 1e9), truth)
     meta = _segment_meta(scenario, segment, camera, mount, renderer.table_light)
     write_text_atomic(out_dir / "meta.json", json.dumps(meta | extra_meta, indent=2) + "\n")
@@ -239,9 +249,10 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
 
 
 def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mount, out_dir: Path,
-                  progress: Callable[[float], None]) -> list[tuple]:
+                  progress: Callable[[float], None], compact: bool = False) -> list[tuple]:
     """The segment's frames under auto-exposure (bracketed ones at the metered exposure times 2^ev),
-    rendered and written as PNG into out_dir/frames; returns frames.csv's rows."""
+    rendered and written as PNG into out_dir/frames (compact: into the video out_dir/frames.mkv); returns
+    frames.csv's rows."""
     cam = scenario.device.camera
     sensor = SensorSettings.of(cam)
     ae = AutoExposure(sensor, response)
@@ -250,7 +261,12 @@ def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mou
     rows = []
     times = np.arange(n_frames) / cam.fps
     views, positions = trajectory.camera_orientation(times, mount), trajectory.position(times)
-    with ThreadPoolExecutor(2) as writers:  # PNG encoding releases the GIL: overlap it with rendering
+    video_name = "frames" + VIDEO_SUFFIX
+    with contextlib.ExitStack() as stack:
+        writers = stack.enter_context(ThreadPoolExecutor(2))  # PNG encoding releases the GIL: overlap it with rendering
+        video = None
+        if compact:
+            video = stack.enter_context(FrameVideo(out_dir / video_name, cam.width, cam.height, cam.fps))
         pending: deque = deque()
         for k in range(n_frames):
             used = ae.next_frame_settings()
@@ -262,11 +278,16 @@ def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mou
             frame = renderer.capture(views[k], *used, noise_key(scenario.run.seed, segment.name, k), positions[k])
             if not ev:
                 ae.update(frame, used)
-            name = f"{k:06d}.png"
-            pending.append(writers.submit(_write_png, out_dir / "frames" / name, frame))
+            if video is not None:
+                video.write(frame)
+                file = video_frame_name(video_name, k)
+            else:
+                name = f"{k:06d}.png"
+                pending.append(writers.submit(_write_png, out_dir / "frames" / name, frame))
+                file = f"frames/{name}"
             while len(pending) > MAX_PENDING_FRAMES:  # bounded: frames waiting to be written hold memory
                 pending.popleft().result()
-            rows.append((int(round(times[k] * 1e9)), int(round(used[0] * 1e9)), round(used[1], 3), f"frames/{name}"))
+            rows.append((int(round(times[k] * 1e9)), int(round(used[0] * 1e9)), round(used[1], 3), file))
             progress((k + 1) / n_frames)
         for future in pending:
             future.result()
@@ -415,6 +436,115 @@ def _read_csv(path: Path, header: list[str]) -> list[list[str]]:
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
+# A recording whose frame images were left out (`arsim run` without --keep-recording): its small files stay, and
+# this file in each segment's folder says what is missing and how to make it again, byte for byte.
+NOT_KEPT = "frames_not_kept.json"
+FRAMES_HEADER = ["t_ns", "exposure_ns", "iso", "file"]
+BURST_HEADER = ["exposure_ns", "iso", "file"]
+
+
+def segment_folders(folder: Path) -> list[Path]:
+    """A recording's folder and its other segments' (the AR path's, which its meta.json names)."""
+    folders = [Path(folder)]
+    try:
+        sub = json.loads((folder / "meta.json").read_text(encoding="utf-8")).get("ar_recording")
+    except (OSError, ValueError, AttributeError):
+        sub = None
+    if isinstance(sub, str) and (folder / sub / "meta.json").is_file():
+        folders.append(folder / sub)
+    return folders
+
+
+def image_files(segment: Path) -> list[str]:
+    """The image files a segment's frames.csv and burst.csv name (paths under the segment's folder; a compact
+    recording's video once)."""
+    names = ([row[3] for row in _read_csv(segment / "frames.csv", FRAMES_HEADER)]
+             + [row[2] for row in _read_csv(segment / "burst.csv", BURST_HEADER)])
+    return list(dict.fromkeys(frame_file(Path(name)).as_posix() for name in names))
+
+
+def images_digest(hashes: dict[str, str]) -> str:
+    """One sha256 over images' paths and their sha256 (hashes: path -> sha256): equal for byte-identical images."""
+    h = hashlib.sha256()
+    for rel in sorted(hashes):
+        h.update(f"{rel}\0{hashes[rel]}\0".encode())
+    return h.hexdigest()
+
+
+def recording_image_paths(folder: Path) -> list[str]:
+    """Every image of a recording, its segments' frames and burst: paths under folder."""
+    return [(segment / name).relative_to(folder).as_posix() for segment in segment_folders(folder)
+            for name in image_files(segment)]
+
+
+def recording_images(folder: Path) -> dict[str, str]:
+    """Every image of a recording: path under folder -> sha256."""
+    hashes = {}
+    for rel in recording_image_paths(folder):
+        with open(folder / rel, "rb") as f:
+            hashes[rel] = hashlib.file_digest(f, "sha256").hexdigest()
+    return hashes
+
+
+def leave_out_images(folder: Path, hashes: dict[str, str], note: dict) -> dict:
+    """The recording's frame images removed (its CSVs, IMU streams, truth, meta.json and plots stay), and in each
+    segment a NOT_KEPT file saying how many, their bytes and digest, with note (what makes them again: the
+    scenario file relative to the recording's folder, under "scenario"). hashes: every image's path under folder
+    -> sha256. Returns the totals: files, bytes, sha256 (images_digest of all of them)."""
+    total = {"files": 0, "bytes": 0}
+    for segment in segment_folders(folder):
+        names = image_files(segment)
+        rels = [(segment / name).relative_to(folder).as_posix() for name in names]
+        size = sum((folder / rel).stat().st_size for rel in rels)
+        prefix = segment.relative_to(folder).as_posix()
+        up = "../" * (0 if prefix == "." else len(Path(prefix).parts))
+        record = {"files": len(rels), "bytes": size,
+                  "sha256": images_digest({name: hashes[rel] for name, rel in zip(names, rels)}),
+                  **note, "scenario": up + note["scenario"]}
+        write_text_atomic(segment / NOT_KEPT, json.dumps(record, indent=2) + "\n")
+        for rel in rels:
+            (folder / rel).unlink()
+        for sub in ("frames", "burst"):
+            if (segment / sub).is_dir() and not any((segment / sub).iterdir()):
+                (segment / sub).rmdir()
+        total["files"] += len(rels)
+        total["bytes"] += size
+    return total | {"sha256": images_digest({rel: hashes[rel] for rel in hashes})}
+
+
+def _not_kept_problem(folder: Path) -> str | None:
+    """Where a recording's images were left out by `arsim run`: what is missing and how to make it again."""
+    path = folder / NOT_KEPT
+    if not path.is_file():
+        return None
+    try:
+        note = json.loads(path.read_text(encoding="utf-8"))
+        files, size, scenario = int(note["files"]), int(note["bytes"]), str(note["scenario"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return f"{folder}: its frame images were left out ({path} says so, but cannot be read); record the scenario again"
+    where = os.path.normpath(folder / scenario)
+    return (f"{folder}: its {files} frame images ({size / 1e6:.1f} MB) were not kept by `arsim run` (they are kept with "
+            f"--keep-recording); make them again, byte-identical, with `arsim record {where} -o REC` and give REC instead")
+
+
+def _check_frames(folder: Path, names: list[str], width: int, height: int) -> None:
+    """Each frame's PNG header (_check_frame_header); a compact recording's video: its size, and a frame for
+    every index named."""
+    videos: dict[Path, int] = {}
+    for name in names:
+        found = video_frame(folder / name)
+        if found is None:
+            _check_frame_header(folder / name, width, height)
+        else:
+            videos[found[0]] = max(videos.get(found[0], -1), found[1])
+    for video, last in videos.items():
+        w, h, count = video_size(video)
+        if (w, h) != (width, height):
+            raise ArsimError(f"{video}: is {w} x {h}, the camera's frames are {width} x {height}; record again")
+        if count <= last:
+            raise ArsimError(f"{video}: holds {count} frames, the CSV names frame {last}; record again")
+
+
 def _check_frame_header(path: Path, width: int, height: int) -> None:
     """A frame's PNG header read (not its pixels: `arsim info` decodes them): a PNG of the camera's size."""
     try:
@@ -478,12 +608,14 @@ def load_recording(folder: Path) -> Recording:
     check_meta(meta, folder / "meta.json")
 
     path = folder / "frames.csv"
-    rows = _read_csv(path, ["t_ns", "exposure_ns", "iso", "file"])
+    rows = _read_csv(path, FRAMES_HEADER)
     numbers = _numbers(path, rows, slice(0, 3))
     t_frames = numbers[:, 0].astype(np.int64) if len(rows) else np.zeros(0, np.int64)
     _increasing(path, t_frames, "frames")
     listed = [row[3] for row in rows]
-    missing = [name for name in listed if not (folder / name).exists()]
+    missing = [name for name in listed if not frame_file(folder / name).exists()]
+    if missing and (problem := _not_kept_problem(folder)) is not None:
+        raise ArsimError(problem)
     if missing:
         raise ArsimError(f"{path}: {len(missing)} listed frames are missing, first {missing[0]}; record again or drop them from frames.csv")
     extra = sorted({f"frames/{p.name}" for p in (folder / "frames").glob("*.png") if not is_temporary(p)} - set(listed))
@@ -491,17 +623,15 @@ def load_recording(folder: Path) -> Recording:
         raise ArsimError(f"{folder / 'frames'}: {len(extra)} frames are not in frames.csv, first {extra[0]}; remove them or list them")
     frames = [{"t_ns": int(n[0]), "exposure_ns": int(n[1]), "iso": float(n[2]), "file": f} for n, f in zip(numbers, listed)]
     cam = meta["camera"]
-    for name in listed:
-        _check_frame_header(folder / name, cam["width"], cam["height"])
+    _check_frames(folder, listed, cam["width"], cam["height"])
 
     path = folder / "burst.csv"
-    rows = _read_csv(path, ["exposure_ns", "iso", "file"])
+    rows = _read_csv(path, BURST_HEADER)
     numbers = _numbers(path, rows, slice(0, 2))
-    missing = [row[2] for row in rows if not (folder / row[2]).exists()]
+    missing = [row[2] for row in rows if not frame_file(folder / row[2]).exists()]
     if missing:
         raise ArsimError(f"{path}: {len(missing)} listed burst frames are missing, first {missing[0]}; record again")
-    for row in rows:
-        _check_frame_header(folder / row[2], cam["width"], cam["height"])
+    _check_frames(folder, [row[2] for row in rows], cam["width"], cam["height"])
     burst = [{"exposure_ns": int(n[0]), "iso": float(n[1]), "file": row[2]} for n, row in zip(numbers, rows)]
 
     path = folder / "imu.csv"

@@ -28,6 +28,7 @@ import yaml
 
 from arsim.core.errors import ArsimError
 from arsim.core.files import write_bytes_atomic, write_text_atomic
+from arsim.core.png import png_of_frame
 from arsim.sensors.formats.common import (FOREIGN_EXPOSURE_NS, FOREIGN_ISO, Photometric, exact_rotations, extras_meta,
                                           fused_orientation,
                                           imu_streams, layout_meta, merged_imu, recording_of)
@@ -139,7 +140,7 @@ def write_euroc(rec: Recording, out: Path, groundtruth_folder: str | None = GROU
     names = []
     for f in rec.frames:
         name = f"{f['t_ns']}.png"
-        write_bytes_atomic(mav / "cam0" / "data" / name, (rec.folder / f["file"]).read_bytes())
+        write_bytes_atomic(mav / "cam0" / "data" / name, png_of_frame(rec.folder / f["file"]))
         names.append((f["t_ns"], name))
     write_text_atomic(mav / "cam0" / "data.csv", _lines(CAM_HEADER, "%d,%s", names))
     write_text_atomic(mav / "cam0" / "sensor.yaml", camera_yaml(rec.meta))
@@ -174,7 +175,7 @@ def write_extras(rec: Recording, folder: Path) -> None:
     rows = []
     for k, b in enumerate(rec.burst):
         name = f"burst/{k:02d}.png"
-        write_bytes_atomic(folder / name, (rec.folder / b["file"]).read_bytes())
+        write_bytes_atomic(folder / name, png_of_frame(rec.folder / b["file"]))
         rows.append((b["exposure_ns"], repr(b["iso"]), name))
     write_text_atomic(folder / "burst.csv", _csv_formatted(["exposure_ns", "iso", "file"], "%d,%s,%s", rows))
 
