@@ -370,8 +370,9 @@ def test_a_compact_recording_holds_the_same_pixels_and_renders_byte_identical_fr
     for name, rec in (("png", png), ("compact", compact)):
         r = arsim("render", rec, "-o", tmp_path / f"render_{name}")
         assert r.returncode == 0, r.stderr
-    frames = sorted(p.name for p in (tmp_path / "render_png" / "frames").iterdir())
-    assert frames and frames == sorted(p.name for p in (tmp_path / "render_compact" / "frames").iterdir())
+    frames = sorted(p.relative_to(tmp_path / "render_png" / "frames").as_posix() for p in (tmp_path / "render_png" / "frames").rglob("*.png"))
+    assert frames and frames == sorted(p.relative_to(tmp_path / "render_compact" / "frames").as_posix()
+                                       for p in (tmp_path / "render_compact" / "frames").rglob("*.png"))
     for name in [*(f"frames/{f}" for f in frames), "session.mp4"]:
         assert (tmp_path / "render_png" / name).read_bytes() == (tmp_path / "render_compact" / name).read_bytes(), name
     # exported to EuRoC's layout (a PNG per frame): the PNG recording's export, byte for byte
