@@ -202,6 +202,7 @@ def _verdict_section(metrics: dict, scenario: Scenario, baseline: dict | None) -
     """The verdict table: per stage its headline figure, unit, what it measures, the thresholds and pass/warn/fail;
     with a baseline run's metrics, its value and the change beside."""
     rows = []
+    theirs = verdicts(baseline, scenario.render.method, scenario.report) if baseline is not None else []
     for v in verdicts(metrics, scenario.render.method, scenario.report):
         status = v.status
         value = unit_text(v.metric, v.value) if v.value is not None else "n/a"
@@ -209,7 +210,7 @@ def _verdict_section(metrics: dict, scenario: Scenario, baseline: dict | None) -
                  html.escape(label_of(v.path) if v.value is not None else v.metric.label) + f'<br><small>{html.escape(v.metric.meaning)}'
                  + (f"; {html.escape(v.note)}" if v.note else "") + "</small>", html.escape(v.threshold_text())]
         if baseline is not None:
-            b = next((x for x in verdicts(baseline, scenario.render.method, scenario.report) if x.metric == v.metric), None)
+            b = next((x for x in theirs if x.metric == v.metric), None)
             if b is None or b.value is None or v.value is None:
                 cells += ["n/a", ""]
             else:
