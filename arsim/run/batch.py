@@ -44,8 +44,9 @@ COLUMNS = (
 
 
 def column_title(key: str) -> str:
+    """The figure's label with its unit, unless the label names it already ("frames lost", "AR frames' FLIP")."""
     m = metric_for(key)
-    return f"{m.label} ({m.unit})" if m.unit else m.label
+    return f"{m.label} ({m.unit})" if m.unit and m.unit.split()[0] not in m.label else m.label
 
 
 def _get(metrics: dict, dotted: str):
