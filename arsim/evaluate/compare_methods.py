@@ -28,6 +28,20 @@ FULL_REFERENCE_MAX_SIZE = 128
 SH_STUDY = "sh, plain truncation (window none), stable and factorial (Alg. 2.5/2.6) Y_lm"
 
 
+def method_label(name: str, params: MapParameters, exponents: Sequence[float]) -> str:
+    """A method's name with what its error depends on: the SH order (per exponent where it varies), and sh's
+    window and evaluation; the same in the printed table, the files, the figures and the run's report."""
+    orders = sh_orders_used(name, params, exponents)
+    if orders is None:
+        return name
+    if name == "sh":
+        extra = f", window {params.sh_window}"
+        extra += ", factorial Y_lm" if params.sh_faithful else ""
+        return f"sh (order {params.sh_order}{extra})"
+    low, high = min(orders), max(orders)
+    return f"{name} (SH order {low})" if low == high else f"{name} (SH order {low}-{high} by exponent)"
+
+
 @dataclass
 class Comparison:
     """Everything compare-methods measured, ready for tables and plots."""
@@ -48,17 +62,8 @@ class Comparison:
         return sh_orders_used(name, self.params, self.exponents)
 
     def label(self, name: str) -> str:
-        """A method's name with what its error depends on: the SH order (per exponent where it varies),
-        and sh's window and evaluation; the same in the printed table, the files and the figures."""
-        orders = self.sh_orders_used(name)
-        if orders is None:
-            return name
-        if name == "sh":
-            extra = f", window {self.params.sh_window}"
-            extra += ", factorial Y_lm" if self.params.sh_faithful else ""
-            return f"sh (order {self.params.sh_order}{extra})"
-        low, high = min(orders), max(orders)
-        return f"{name} (SH order {low})" if low == high else f"{name} (SH order {low}-{high} by exponent)"
+        """method_label of a method as this comparison ran it."""
+        return method_label(name, self.params, self.exponents)
 
     def method_parameters(self, name: str) -> dict:
         """tables.json's and tables.csv's record of a method: its label, and for SH-based ones the order of

@@ -66,6 +66,11 @@ class MetricChange:
     def change(self) -> float | None:
         return None if self.a is None or self.b is None else self.b - self.a
 
+    @property
+    def verdict(self) -> str:
+        return ("worse" if self.gated else "worse (timed: not gated)" if self.worse else
+                "only in a" if self.b is None else "only in b" if self.a is None else "")
+
 
 def compare_metrics(a: dict, b: dict, gate_times: bool = False) -> list[MetricChange]:
     """Every figure of either run (figures_of), a's order first. Worse: beyond the registry's tolerance for the
@@ -158,11 +163,9 @@ class DiffResult:
         rows = ["| figure | key | a | b | change | better | verdict |", "|---|---|---|---|---|---|---|"]
         for m in self.metrics:
             metric = metric_for(m.path)
-            verdict = ("worse" if m.gated else "worse (timed: not gated)" if m.worse else
-                       "only in a" if m.b is None else "only in b" if m.a is None else "")
             change = "" if m.change is None else f"{m.change:+.4g}"
             rows.append(f"| {m.label} | `{m.path}` | {unit_text(metric, m.a) if m.a is not None else '-'} | "
-                        f"{unit_text(metric, m.b) if m.b is not None else '-'} | {change} | {m.better or '-'} | {verdict} |")
+                        f"{unit_text(metric, m.b) if m.b is not None else '-'} | {change} | {m.better or '-'} | {m.verdict} |")
         return "\n".join(rows) + "\n"
 
 
@@ -319,11 +322,10 @@ def metrics_html(result: DiffResult) -> str:
     rows = []
     for m in result.metrics:
         metric = metric_for(m.path)
-        verdict = "worse" if m.gated else "worse (timed: not gated)" if m.worse else ""
         rows.append(f"<tr class=\"{'over' if m.gated else ''}\"><td style=\"text-align:left\">{html.escape(m.label)}<br><small>"
                     f"{html.escape(m.path)}</small></td><td>{html.escape(unit_text(metric, m.a)) if m.a is not None else '-'}</td>"
                     f"<td>{html.escape(unit_text(metric, m.b)) if m.b is not None else '-'}</td>"
-                    f"<td>{'' if m.change is None else f'{m.change:+.4g}'}</td><td>{m.better or '-'}</td><td>{verdict}</td></tr>")
+                    f"<td>{'' if m.change is None else f'{m.change:+.4g}'}</td><td>{m.better or '-'}</td><td>{m.verdict}</td></tr>")
     return (f"<h2>Figures ({len(result.worse)} worse beyond their tolerance)</h2><table><tr><th>figure</th><th>a</th><th>b</th>"
             f"<th>change</th><th>better</th><th>verdict</th></tr>{''.join(rows)}</table>")
 

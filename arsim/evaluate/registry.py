@@ -216,11 +216,12 @@ class Verdict:
     fail: float
     note: str = ""
     path: str = ""  # the figure judged (the worst where several are)
+    by_construction: bool = False  # what it is by construction (0 FLIP with the truth's own maps): not judged
 
     @property
     def status(self) -> str:
         """pass, warn, fail; or n/a where the figure was not measured or is what it is by construction."""
-        if self.value is None or not math.isfinite(self.value) or self.note.startswith("by construction"):
+        if self.value is None or not math.isfinite(self.value) or self.by_construction:
             return "n/a"
         worse = (lambda x, t: x > t) if self.metric.better != HIGHER else (lambda x, t: x < t)
         return "fail" if worse(self.value, self.fail) else "warn" if worse(self.value, self.warn) else "pass"
@@ -265,7 +266,8 @@ def verdicts(metrics: dict, method: str, thresholds) -> list[Verdict]:
             value = values[worst]
             if len(values) > 1:
                 note = f"worst of {len(values)}"
-        if path == "session.flip_mean" and metrics.get("session", {}).get("lit_by_truth"):
+        by_construction = path == "session.flip_mean" and bool(metrics.get("session", {}).get("lit_by_truth"))
+        if by_construction:
             note = "by construction 0: the objects were lit by the true environment's own maps"
-        out.append(Verdict(stage, metric, value, warn, fail, note, worst))
+        out.append(Verdict(stage, metric, value, warn, fail, note, worst, by_construction))
     return out

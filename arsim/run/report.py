@@ -17,13 +17,13 @@ import numpy as np
 from arsim.core.files import atomic_path, write_text_atomic
 from arsim.core.hdr_io import tonemap_preview
 from arsim.core.png import png_bytes, read_frame
-from arsim.evaluate.compare_methods import maps_grid
+from arsim.evaluate.compare_methods import maps_grid, method_label
 from arsim.evaluate.diff import compare_images, magma
 from arsim.evaluate.metrics import relative_error
 from arsim.evaluate.registry import figures_of, label_of, metric_for, unit_text, verdicts, worse_beyond_tolerance
 from arsim.evaluate.tracking import TrackingRun
 from arsim.lighting.mapset import MapSet
-from arsim.lighting.methods import MapParameters, sh_orders_used
+from arsim.lighting.methods import MapParameters  # (the run bakes with the defaults)
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
@@ -252,15 +252,6 @@ def _shown_toml(scenario: Scenario) -> str:
     return re.sub(r'"(/[^"]*/)([^"/]+)"', r'".../\2"', scenario_to_toml(scenario))
 
 
-def method_label(name: str, exponents) -> str:
-    """A map method's name with the SH order its maps were made with (the run bakes with the default parameters)."""
-    orders = sh_orders_used(name, MapParameters(), exponents)
-    if orders is None:
-        return name
-    low, high = min(orders), max(orders)
-    return f"{name} (SH order {low})" if low == high else f"{name} (SH order {low}-{high})"
-
-
 def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, tracking: TrackingRun, frames: np.ndarray,
                  maps: dict[str, MapSet], truth_maps: dict[str, MapSet] | None = None, baseline: dict | None = None) -> Path:
     """report/index.html. Where the recording lacks a truth (metrics["truth"]), each section that needs it says
@@ -271,7 +262,7 @@ def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, trac
     absent = metrics.get("truth", {})
     no_poses, no_scene = absent.get("groundtruth"), absent.get("scenario")
     exponents = next(iter(maps.values())).exponents
-    maps_grid({method_label(name, exponents): np.stack([m[s] for s in exponents]) for name, m in maps.items()}, exponents,
+    maps_grid({method_label(name, MapParameters(), exponents): np.stack([m[s] for s in exponents]) for name, m in maps.items()}, exponents,
               report / "maps.png", "Irradiance (s = 1) and reflection maps baked from the captured probe")
     compared = [name for name in maps if truth_maps and name in truth_maps]  # [render] method's first
     compared.sort(key=lambda name: name != scenario.render.method)
