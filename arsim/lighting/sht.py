@@ -216,8 +216,9 @@ def grid_size(bands: int) -> tuple[int, int]:
     return n_theta, 2 * (n_theta - 1)
 
 
-def sht_map(env: np.ndarray, prepared: tuple[np.ndarray, int], exponent: float) -> np.ndarray:
-    """The map (N, N, 3) float32 of one exponent from sht_prepare's alm."""
+def sht_map(env: np.ndarray, prepared: tuple[np.ndarray, int], exponent: float, out: np.ndarray | None = None) -> np.ndarray:
+    """The map (N, N, 3) float32 of one exponent from sht_prepare's alm (into out, zeros outside the disk,
+    where given)."""
     alm, lmax = prepared
     n = env.shape[0]
     bands = min(bands_for_exponent(exponent), lmax + 1)
@@ -227,16 +228,21 @@ def sht_map(env: np.ndarray, prepared: tuple[np.ndarray, int], exponent: float) 
     keep = (l < bands) & (m < bands)
     size = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
     grid = synthesise_cc_grid(zonal_scale(alm[:, keep], kappa), bands - 1, *size)
-    out = np.zeros((n * n, 3), dtype=np.float32)
-    cubic_lookup_into(out, _disk_index(n), grid.reshape(3, -1), *size, *grid_coordinates(n, *size),
+    if out is None:
+        out = np.zeros((n, n, 3), dtype=np.float32)
+    cubic_lookup_into(out.reshape(n * n, 3), _disk_index(n), grid.reshape(3, -1), *size, *grid_coordinates(n, *size),
                       _weight_map(n, float(exponent), bands))
-    return out.reshape(n, n, 3)
+    return out
 
 
 def sht_maps(env: np.ndarray, exponents: Sequence[float]) -> np.ndarray:
-    """Maps (E, N, N, 3) float32 for the exponents."""
+    """Maps (E, N, N, 3) float32 for the exponents (written in place: no stacking copy)."""
     prepared = sht_prepare(env, exponents)
-    return np.stack([sht_map(env, prepared, s) for s in exponents])
+    n = env.shape[0]
+    maps = np.zeros((len(exponents), n, n, 3), dtype=np.float32)
+    for k, s in enumerate(exponents):
+        sht_map(env, prepared, s, maps[k])
+    return maps
 
 
 def _source_texels(source: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
