@@ -2,6 +2,12 @@
 
     python benchmarks/bench_sht.py [--assets city,interior,sunrise] [--texels 300] [--fine 2048] [--quick]
     python benchmarks/bench_sht.py --speed [--assets city]
+    python benchmarks/bench_sht.py --transforms [--assets city]   # ducc0 against SHTns (if installed)
+
+--transforms: the grid syntheses `sht` runs at 512² (each exponent's bandlimit and grid), timed with ducc0 in
+double and single precision and with SHTns (double; built from source with FFTW: `apt-get install
+libfftw3-dev && pip install shtns`), and `sht` end to end with its syntheses on SHTns. SHTns has no
+non-uniform transform, so the exact texel sums stay on ducc0 either way.
 
 --speed: per asset, `mc` at 64 samples against `sh` at order 64 (nine maps each, best of 3, in the same
 run: both times and their ratio) with mc's error against brute force, then `sh` at orders 3 to 1024, each
@@ -177,6 +183,68 @@ def speed(names, texels: int) -> None:
               "time over it: " + ", ".join(f"{o}: {t:.3f} ({t / alone[64]:.2f}x; sh {times[o] / t:.2f}x)" for o, t in alone.items()))
 
 
+def transforms(names) -> None:
+    """ducc0 against SHTns on the syntheses `sht` runs (best of 5, ms), and `sht` with SHTns syntheses."""
+    try:
+        import shtns
+    except ImportError:
+        sys.exit("--transforms needs SHTns: apt-get install libfftw3-dev && pip install shtns")
+    from arsim.lighting import sht
+    from arsim.lighting.sh_kernel import cubic_lookup_into
+
+    plans = {}
+
+    def plan(lmax, n_theta, n_phi):  # SHTns's regular grid with both poles: ducc0's Clenshaw-Curtis geometry
+        if (lmax, n_theta, n_phi) not in plans:
+            p = shtns.sht(lmax, lmax, 1, shtns.sht_orthonormal)
+            p.set_grid(n_theta, n_phi, shtns.sht_reg_poles | shtns.SHT_PHI_CONTIGUOUS, 1e-10)
+            plans[lmax, n_theta, n_phi] = p
+        return plans[lmax, n_theta, n_phi]
+
+    def grids(lmax):
+        for s in EXPONENTS:
+            bands = min(sht.bands_for_exponent(s), lmax + 1)
+            yield s, bands, sht.grid_size(max(bands // 2, sht.bands_for_exponent(s, sht.GRID_TRUNCATION)))
+
+    def with_shtns(env):
+        alm, lmax = sht.sht_prepare(env, EXPONENTS)
+        n = env.shape[0]
+        l, m, _ = sht._alm_index(lmax)
+        out = np.zeros((len(EXPONENTS), n, n, 3), np.float32)
+        for k, (s, bands, size) in enumerate(grids(lmax)):
+            a = sht.zonal_scale(alm[:, (l < bands) & (m < bands)], phong_zonal_coefficients(s, bands)).astype(np.complex128)
+            grid = np.stack([plan(bands - 1, *size).synth(c) for c in a]).astype(np.float32)
+            cubic_lookup_into(out[k].reshape(n * n, 3), sht._disk_index(n), grid.reshape(3, -1), *size,
+                              *sht.grid_coordinates(n, *size), sht._weight_map(n, float(s), bands))
+        return out
+
+    rng = np.random.default_rng(0)
+    lmax = max(sht.bands_for_exponent(s) for s in EXPONENTS) - 1
+    print("one synthesis per grid sht uses at 512², ms (best of 5): ducc0 double, ducc0 single, SHTns double")
+    totals = np.zeros(3)
+    for s, bands, (n_theta, n_phi) in grids(lmax):
+        nalm = bands * (bands + 1) // 2
+        alm = rng.standard_normal(nalm) + 1j * rng.standard_normal(nalm)
+        alm[:bands] = alm[:bands].real  # m = 0: real
+        p = plan(bands - 1, n_theta, n_phi)
+        difference = np.max(np.abs(p.synth(alm) - SHT.synthesis_2d(alm=alm[None], spin=0, lmax=bands - 1, geometry="CC",
+                                                                    ntheta=n_theta, nphi=n_phi, nthreads=0)[0]))
+        times = [best_of(5, lambda a=a: SHT.synthesis_2d(alm=a[None], spin=0, lmax=bands - 1, geometry="CC", ntheta=n_theta,
+                                                          nphi=n_phi, nthreads=0))
+                 for a in (alm, alm.astype(np.complex64))] + [best_of(5, lambda: p.synth(alm))]
+        totals += times
+        print(f"  s = {s:>4}: {bands} bands on {n_theta}x{n_phi}: " + ", ".join(f"{1000 * t:.2f}" for t in times)
+              + f"  (SHTns/ducc0 double agree to {difference:.1e})")
+    print("  nine maps' syntheses (3 channels each): " + ", ".join(f"{3000 * t:.1f} ms" for t in totals))
+    for name in names:
+        env = to_layout(read_hdr(assets_dir() / "envmaps" / f"{name}.exr"), "anglemap", 512)
+        for f in (lambda: sht.sht_maps(env, EXPONENTS), lambda: with_shtns(env)):
+            f()  # warm: plans, per-size caches
+        ducc_s = best_of(5, lambda: sht.sht_maps(env, EXPONENTS))
+        shtns_s = best_of(5, lambda: with_shtns(env))
+        print(f"{name}: sht {1000 * ducc_s:.1f} ms; with SHTns syntheses {1000 * shtns_s:.1f} ms ({ducc_s / shtns_s:.2f}x)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--assets", default="city,interior,sunrise")
@@ -187,7 +255,11 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="skip the fine reference and the window sweep")
     parser.add_argument("--skip-windows", action="store_true", help="skip the window sweep and mc")
     parser.add_argument("--speed", action="store_true", help="only mc against sh at order 64, and sh's order sweep")
+    parser.add_argument("--transforms", action="store_true", help="only ducc0 against SHTns on sht's syntheses")
     args = parser.parse_args()
+    if args.transforms:
+        transforms(args.assets.split(","))
+        return
     if args.speed:
         speed(args.assets.split(","), args.texels)
         return
