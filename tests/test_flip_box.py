@@ -44,3 +44,18 @@ def test_the_diff_maps_error_equals_the_full_frames_everywhere(frames):
     a, b, _ = frames
     _, error = compare_images(a, b)
     np.testing.assert_allclose(error, full_frame(a, b), rtol=0, atol=1e-7)
+
+
+def test_objects_apart_slanted_and_at_the_frames_edge_get_their_full_frame_values():
+    # masked_flip's boxes: one per group of masked pixels, cut into bands of rows; groups far apart, a slanted
+    # row of blobs taller than a band and a group on the frame's corner each get the full frame's values
+    rng = np.random.default_rng(5)
+    y, x = np.mgrid[0:300, 0:400]
+    a = np.stack([(x * 0.9) % 255, (y * 1.3) % 255, ((x - y) * 0.6) % 255], axis=-1).astype(np.uint8)
+    b = np.clip(a.astype(int) + rng.integers(-35, 35, a.shape), 0, 255).astype(np.uint8)
+    mask = np.zeros(a.shape[:2], bool)
+    mask[20:50, 300:340] = True  # apart from the others
+    for k in range(12):  # a slanted row of small blobs, 180 rows tall
+        mask[60 + 15 * k:68 + 15 * k, 20 + 12 * k:28 + 12 * k] = True
+    mask[285:300, 385:400] = True  # on the corner
+    assert masked_flip(a, b, mask) == pytest.approx(float(full_frame(a, b)[mask].mean()), rel=0, abs=1e-7)

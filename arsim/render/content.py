@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from arsim.core.conventions import normalize, texture_texel_uv
@@ -115,9 +116,33 @@ def bake_torus_occlusion(major: float = 0.05, minor: float = 0.02, size: tuple[i
     directions = (local[:, 0, None, None, None] * t_axis + local[:, 1, None, None, None] * b_axis
                   + local[:, 2, None, None, None] * normal)  # (R, H, W, 3)
     origin = point + normal * (1e-3 * minor)
-    hit = sphere_trace(origin, directions, lambda p: scene_distance(p, major, minor), minor, 6.0 * (major + minor))
-    occlusion = (~hit).mean(axis=0)
+    hits = _torus_scene_hits(origin.reshape(-1, 3), directions.reshape(len(directions), -1, 3), major, minor,
+                             6.0 * (major + minor), 96)
+    occlusion = (len(directions) - hits.reshape(point.shape[:2])) / len(directions)  # (the share that escapes)
     return np.repeat(occlusion[..., None], 3, axis=-1).astype(np.float32)
+
+
+@numba.njit(parallel=True, cache=True)
+def _torus_scene_hits(origins, directions, major, minor, reach, steps):
+    """Per origin (N, 3), how many of its rays (R, N, 3) hit the torus resting on y = 0 or the table top
+    within reach: sphere_trace with scene_distance's field, compiled (the numpy march takes 1.4 s for the
+    session torus's 64 x 128 texels and 81 rays; this a few hundredths), step for step the same rule."""
+    hits = np.zeros(len(origins))
+    for i in numba.prange(len(origins)):
+        for r in range(directions.shape[0]):
+            travelled = 1e-3 * minor
+            for _ in range(steps):
+                x = origins[i, 0] + directions[r, i, 0] * travelled
+                y = origins[i, 1] + directions[r, i, 1] * travelled
+                z = origins[i, 2] + directions[r, i, 2] * travelled
+                gap = min(np.hypot(np.hypot(x, z) - major, y - minor) - minor, y)
+                if gap < 1e-4 * minor:
+                    hits[i] += 1
+                    break
+                travelled += max(gap, 1e-5 * minor)
+                if travelled > reach:
+                    break
+    return hits
 
 
 def ridges_normal_map(size: tuple[int, int] = (128, 256), ridges: tuple[int, int] = (24, 8),

@@ -830,8 +830,14 @@ class Renderer:
         return self._read_tile("hdr", 4, "f2")[..., :3]
 
     def read_mask(self) -> np.ndarray:
-        """(H, W) 1 where an object was drawn, 0 elsewhere: the HDR colour's alpha."""
-        return self._read_tile("hdr", 4, "f2")[..., 3]
+        """(H, W) 1 where an object was drawn, 0 elsewhere: the HDR colour's alpha (read every frame: only the
+        alpha is converted and placed into the frame)."""
+        frame = np.zeros((self.camera.height, self.camera.width), np.float32)
+        if self.tile is not None:
+            texture, (x, y, w, h) = self.tile.hdr, self.rect
+            alpha = np.frombuffer(texture.read(), dtype=np.float16).reshape(texture.height, texture.width, 4)[:h, :w, 3]
+            frame[y:y + h, x:x + w] = alpha
+        return frame[::-1]
 
     def read_debug(self) -> tuple[np.ndarray, np.ndarray]:
         """(normal (H, W, 4): the shaded normal and the light-map value in w, incident (H, W, 4))."""

@@ -7,8 +7,11 @@ the profiler. What the poses and the timings measure is the evaluation's (arsim.
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,7 +56,45 @@ class SessionSettings:
     fusion: bool = True  # the tag's poses fused with the IMU ([ar] fusion)
 
 
-Scorer = Callable[[np.ndarray, np.ndarray, np.ndarray], float]  # (truth frame, frame, mask) -> score inside the mask
+# (truth frame, frame, mask) -> score inside the mask, or a Future of it (a scorer working beside the loop)
+Scorer = Callable[[np.ndarray, np.ndarray, np.ndarray], float | Future]
+
+
+def _value(score: float | Future) -> float:
+    return score.result() if isinstance(score, Future) else score
+
+
+class _VideoWriter:
+    """session.mp4 encoded on a thread beside the loop (OpenCV lets go of the GIL while it converts and
+    encodes); frames are written in the order given."""
+
+    def __init__(self, path: Path, fps: float, size: tuple[int, int]):
+        self.video = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, size)
+        self.queue = queue.Queue(maxsize=8)  # (a few frames ahead at most: the loop waits rather than hoards)
+        self.error = None
+        self.thread = threading.Thread(target=self._encode, daemon=True)
+        self.thread.start()
+
+    def _encode(self) -> None:
+        while (frame := self.queue.get()) is not None:
+            if self.error is None:  # (after a failure the queue is still drained: the loop never waits on it)
+                try:
+                    self.video.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+                except Exception as e:  # raised in the loop's thread by close
+                    self.error = e
+
+    def write(self, frame: np.ndarray) -> None:
+        self.queue.put(frame)
+
+    def __enter__(self) -> "_VideoWriter":
+        return self
+
+    def __exit__(self, kind, error, trace) -> None:
+        self.queue.put(None)
+        self.thread.join()
+        self.video.release()
+        if self.error is not None and kind is None:
+            raise self.error
 
 
 @dataclass
@@ -149,8 +190,9 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     shading = Shading(settings.key, settings.white, settings.log_average)
     loop = FrameLoop(ctx, tracker, captured, shading, settings.overlay, settings.method, lights=settings.lights,
                      light_frames=count, tracked=tracked)
-    with atomic_path(out_dir / "session.mp4") as video_path:
-        video = cv2.VideoWriter(str(video_path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (camera.width, camera.height))
+    pending = {}  # frame n -> its score (a Future where the scorer works beside the loop)
+    with (atomic_path(out_dir / "session.mp4") as video_path,
+          _VideoWriter(video_path, fps, (camera.width, camera.height)) as video):
         frames = read_frames(rec.folder / rec.frames[k]["file"] for k in indices)  # (decoded ahead of the loop)
         for n, (k, frame) in enumerate(zip(indices, frames)):
             time_s = frame_time_s(rec, k)
@@ -179,7 +221,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                 truth_frame = _lit_frame(true_light, pose, time_s, frame, settings, overlay_box, out)
                 if overlay_box is not None:
                     mask[overlay_box] = False
-                flips[n] = score(truth_frame, out, mask) if mask.any() else np.nan
+                if mask.any():
+                    pending[n] = score(truth_frame, out, mask)
                 step_ms["truth_frame"].append(1000 * (time.perf_counter() - start))
                 if k in saved:  # (shown beside the frame in the report)
                     (out_dir / "frames" / "truth").mkdir(exist_ok=True)
@@ -189,12 +232,14 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                     estimate_frames[int(k)] = {"truth_frame": truth_frame, "mask": mask, "lit": lit}
                     for name, image in lit.items():
                         estimate_scores[name][int(k)] = score(truth_frame, image, mask)
-            video.write(cv2.cvtColor(out, cv2.COLOR_RGB2BGR))
+            video.write(out)
             if k in saved:
                 write_bytes_atomic(out_dir / "frames" / f"{k:06d}.png", png_bytes(out))
             if n % 10 == 0 or n == count - 1:
                 progress((n + 1) / count)
-        video.release()
+    for n, value in pending.items():
+        flips[n] = _value(value)
+    estimate_scores = {name: {k: _value(v) for k, v in scores.items()} for name, scores in estimate_scores.items()}
     return SessionResult(indices, poses, flips, step_ms, gl_ms, records, estimate_frames, estimate_scores,
                          true_light is not None)
 

@@ -417,7 +417,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     figures the report shows beside the run's. The recording made (or reused) is read where it lies while the run
     works; its frame images are left out of out at the end unless keep_recording (README: Run outputs and disk)."""
     from arsim.capture.pipeline import CaptureSettings, recording_scenario
-    from arsim.evaluate.diff import masked_flip
+    from arsim.evaluate.diff import flip_scorer
     from arsim.evaluate.estimates import estimate_summary, write_estimate_frames
     from arsim.evaluate.profile import ProfileRun, write_profile
     from arsim.evaluate.session import lit_by_truth, session_metrics
@@ -547,9 +547,9 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         tracked_as["key"] = tracking_key(scenario, keys["capture"], session_settings.every)
         hit = cache.lookup("tracking", tracked_as["key"])
         tracked_as["status"] = "reused" if hit is not None else "computed"
-        with step("session", description) as update:
+        with step("session", description) as update, flip_scorer() as score:
             session = run_session(ar, captured.response.linear[:, 1], maps, baked["truth_maps"] if truth is not None else None,
-                                  out, light_objects(objects, probe), masked_flip, session_settings,
+                                  out, light_objects(objects, probe), score, session_settings,
                                   truth_objects=light_objects(objects, truth) if truth is not None else None,
                                   progress=lambda f: update(completed=f),
                                   estimates=estimate_lights(estimates.final, needed, objects, r.map_size),
