@@ -20,7 +20,7 @@ from arsim.capture.pipeline import CaptureSettings, capture, recording_scenario
 from arsim.core.resample import to_layout
 from arsim.capture.accumulate import filled
 from arsim.render.content import scene_objects
-from arsim.evaluate.diff import masked_flip
+from arsim.evaluate.flip import masked_flip
 from arsim.render.session import SessionSettings, maps_needed, run_session, session_maps
 from arsim.scenario.environment import load_environment
 from arsim.sensors.recording import load_recording

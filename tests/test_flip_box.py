@@ -4,7 +4,8 @@ import flip_evaluator
 import numpy as np
 import pytest
 
-from arsim.evaluate.diff import FLIP_RADIUS, compare_images, flip_map, masked_flip
+from arsim.evaluate.diff import compare_images
+from arsim.evaluate.flip import FLIP_RADIUS, flip_map, masked_flip
 
 
 def full_frame(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -59,3 +60,6 @@ def test_objects_apart_slanted_and_at_the_frames_edge_get_their_full_frame_value
         mask[60 + 15 * k:68 + 15 * k, 20 + 12 * k:28 + 12 * k] = True
     mask[285:300, 385:400] = True  # on the corner
     assert masked_flip(a, b, mask) == pytest.approx(float(full_frame(a, b)[mask].mean()), rel=0, abs=1e-7)
+    # the same values as the error map's over the mask, to the bit: the session takes an estimate's score as
+    # the mean of the map it shows
+    assert masked_flip(a, b, mask) == float(flip_map(a, b, mask)[mask].mean())

@@ -32,3 +32,28 @@ def test_png_of_strided_views_equals_their_copies(view):
     assert png_bytes(image) == png_bytes(np.ascontiguousarray(image))
     decoded = cv2.imdecode(np.frombuffer(png_bytes(image), np.uint8), cv2.IMREAD_UNCHANGED)
     assert np.array_equal(decoded[..., ::-1] if image.ndim == 3 else decoded, image)
+
+
+@pytest.mark.parametrize("shape", [(480, 640, 3), (7, 5, 3), (3, 1, 3), (6, 4)])
+def test_read_frame_unfilters_arsims_frames_as_opencv_decodes_them(tmp_path, shape):
+    """read_frame unfilters a frame laid out as png_bytes writes it from the data its check inflated, and
+    hands any other PNG (grey; rows without the Sub filter) to OpenCV: the pixels are OpenCV's either way."""
+    import struct
+    import zlib
+
+    from arsim.core.png import _parsed, _written_here, read_frame
+
+    image = np.random.default_rng(sum(shape)).integers(0, 256, shape, dtype=np.uint8)
+    ours, plain = tmp_path / "ours.png", tmp_path / "plain.png"
+    ours.write_bytes(png_bytes(image))
+    # the same image with every row unfiltered (filter type 0), as other writers may store it
+    rows = np.hstack([np.zeros((shape[0], 1), np.uint8), image.reshape(shape[0], -1)])
+    header = struct.pack(">IIBBBBB", shape[1], shape[0], 8, 2 if image.ndim == 3 else 0, 0, 0, 0)
+    chunk = lambda kind, data: struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    plain.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows.tobytes()))
+                      + chunk(b"IEND", b""))
+    for path, fast in ((ours, image.ndim == 3), (plain, False)):
+        _, header, pixels = _parsed(path.read_bytes())
+        assert (_written_here(header, pixels) is not None) == fast
+        expected = np.repeat(image[..., None], 3, axis=-1) if image.ndim == 2 else image
+        assert np.array_equal(read_frame(path), expected)

@@ -377,7 +377,8 @@ def test_the_report_opens_with_verdicts_units_and_thresholds(runs):
     assert 'href="../session.mp4"' in page and 'href="../manifest.json"' in page
     # the frames shown beside their truth frames and FLIP maps; the maps beside the truth's and their error
     assert (runs / "a" / "frames" / "truth" / "000000.png").is_file() and (runs / "a" / "report" / "frame_000000.png").is_file()
-    assert all((runs / "a" / "report" / f"maps_vs_truth_{m}.png").is_file() for m in ("fast", "mipmap"))
+    assert all((runs / "a" / "maps" / f"vs_truth_{m}.png").is_file() for m in ("fast", "mipmap"))
+    assert (runs / "a" / "maps" / "maps.png").is_file()
 
 
 def test_every_figure_of_a_run_is_registered_with_a_unit_and_meaning(runs):

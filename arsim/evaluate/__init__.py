@@ -8,6 +8,7 @@ __all__, __getattr__ = lazy_names(__name__, {
     "tracking": ("measure_poses", "TrackingRun"),
     "session": ("session_metrics",),
     "profile": ("ProfileRun", "write_profile"),
-    "diff": ("run_diff", "masked_flip"),
+    "diff": ("run_diff",),
+    "flip": ("masked_flip",),
     "metrics": ("map_error",),
 })

@@ -17,8 +17,9 @@ import numpy as np
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask
 from arsim.core.files import atomic_path, write_text_atomic
 from arsim.core.hdr_io import tonemap_preview
-from arsim.evaluate.metrics import map_error
+from arsim.evaluate.metrics import map_error, relative_error
 from arsim.lighting.accurate import lobe_average_at
+from arsim.lighting.mapset import MapSet
 from arsim.lighting.methods import MapParameters, bake, method, sh_orders_used
 from arsim.lighting.sh import sh_maps
 
@@ -321,3 +322,53 @@ def write_comparison(c: Comparison, out_dir: Path) -> list[Path]:
         paths.append(out_dir / "sh_order.png")
         sh_order_plot(c, paths[-1])
     return paths
+
+
+def plot_maps_vs_truth(maps: MapSet, truth: MapSet, path: Path) -> None:
+    """Per exponent: the map from the captured probe, the truth's (both tone-mapped on one scale, so that they
+    compare), and the per-texel relative error (metrics.relative_error, mean over RGB, %) with a colour bar."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    exponents = [s for s in maps.exponents if s in truth.maps]
+    fig, axes = plt.subplots(3, len(exponents), figsize=(1.9 * len(exponents) + 1.2, 6.0), dpi=100, squeeze=False)
+    errors = []
+    for j, s in enumerate(exponents):
+        a, b = truth.maps[s], maps.maps[s]
+        inside = a.sum(axis=-1) > 0
+        both = tonemap_preview(np.concatenate([b, a], axis=1))
+        n = a.shape[1]
+        err = np.full(a.shape[:2], np.nan)
+        err[inside] = 100 * relative_error(a[inside], b[inside]).mean(axis=-1)
+        errors.append(err)
+        for i, (image, label) in enumerate(((both[:, :n], "captured"), (both[:, n:], "truth"))):
+            axes[i, j].imshow(image)
+            if j == 0:
+                axes[i, j].set_ylabel(label, fontsize=9)
+        axes[0, j].set_title("irradiance" if s == 1 else f"s = {s:g}", fontsize=9)
+    top = max(1.0, float(np.nanpercentile(np.concatenate([e[np.isfinite(e)] for e in errors]), 99)))
+    for j, err in enumerate(errors):
+        shown = axes[2, j].imshow(err, cmap="magma", vmin=0.0, vmax=top)
+        axes[2, j].set_xlabel(f"mean {np.nanmean(err):.2f} %", fontsize=8)
+    axes[2, 0].set_ylabel("error", fontsize=9)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.colorbar(shown, ax=axes[2, :].tolist(), fraction=0.02, pad=0.01, label="relative error (%)")
+    fig.suptitle(f"{maps.method} maps from the captured probe against the true environment's (error: the colour "
+                 "bar's top is the 99th percentile)", fontsize=10)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    plt.close(fig)
+
+
+def maps_figures(maps: dict[str, MapSet], truth_maps: dict[str, MapSet], folder: Path) -> None:
+    """A run's maps drawn into folder: maps.png (every method's, maps_grid) and vs_truth_<method>.png per method
+    with the true environment's maps beside it (plot_maps_vs_truth)."""
+    exponents = next(iter(maps.values())).exponents
+    maps_grid({method_label(name, MapParameters(), exponents): np.stack([m[s] for s in exponents]) for name, m in maps.items()},
+              exponents, folder / "maps.png", "Irradiance (s = 1) and reflection maps baked from the captured probe")
+    for name, truth in truth_maps.items():
+        plot_maps_vs_truth(maps[name], truth, folder / f"vs_truth_{name}.png")

@@ -194,12 +194,14 @@ def write_estimate_frames(frames: dict, folder) -> list:
     """Per frame shown (render.session's estimate_frames): a PNG of the objects' region in the truth frame
     and lit by each estimate, the FLIP error of each below it (magma, 0 to 1) with its mean over the objects
     (without a truth frame: the objects' mask and the frames lit by each estimate, in one row);
-    returns the paths written."""
+    returns the paths written. The error maps are the frames' own ("errors", where the session made them), else
+    flip_map's."""
     import cv2
 
     from arsim.core.files import write_bytes_atomic
     from arsim.core.png import png_bytes
-    from arsim.evaluate.diff import magma, flip_map
+    from arsim.evaluate.diff import magma
+    from arsim.evaluate.flip import flip_map
 
     written = []
     for k, shown in sorted(frames.items()):
@@ -221,7 +223,8 @@ def write_estimate_frames(frames: dict, folder) -> list:
         for name, image in shown["lit"].items():
             top.append(tile(image, f"{name}'s estimate"))
             if truth is not None:
-                error = flip_map(truth, image, mask)
+                error = shown.get("errors", {}).get(name)
+                error = flip_map(truth, image, mask) if error is None else error
                 bottom.append(tile(magma(error), f"FLIP {float(error[mask].mean()):.4f}"))
         if truth is None:  # (no truth frame: the estimates' frames beside the objects' mask, nothing scored)
             top, bottom = bottom + top, []

@@ -198,7 +198,7 @@ def srgb8(radiance: np.ndarray, exposure: float) -> np.ndarray:
 def scores(c: InmComparison) -> dict[str, dict[str, float]]:
     """Per lighting (the thesis's and each INM's): FLIP (LDR, on one exposure: the reference's 99th
     percentile to 0.9) and the mean squared error of the radiance over the reference's mean square."""
-    from arsim.evaluate.diff import masked_flip
+    from arsim.evaluate.flip import masked_flip
 
     exposure = 0.9 / float(np.percentile(c.reference[c.hit].max(axis=-1), 99))
     ref8 = srgb8(c.reference, exposure)

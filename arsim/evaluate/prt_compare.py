@@ -134,7 +134,7 @@ def exposure_of(reference: np.ndarray, hit: np.ndarray) -> float:
 
 def prt_scores(c: PrtComparison) -> dict[str, dict[str, dict[str, float]]]:
     """probe -> lighting -> FLIP (LDR, on the reference's exposure) and the relative mean squared error."""
-    from arsim.evaluate.diff import masked_flip
+    from arsim.evaluate.flip import masked_flip
 
     out = {}
     for probe, reference in c.reference.items():

@@ -161,7 +161,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                 truth_objects: list[SceneObject] | None = None,
                 progress: Callable[[float], None] = lambda fraction: None,
                 estimates: dict[str, tuple[dict[str, MapSet], list[SceneObject]]] | None = None,
-                tracked: dict[int, tuple[TagPose, float]] | None = None) -> SessionResult:
+                tracked: dict[int, tuple[TagPose, float]] | None = None,
+                error_map: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray | Future] | None = None) -> SessionResult:
     """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
     (a set per method: from the captured probe, or baked before) and truth frames lit by
     `truth_maps` (the same from the true environment), each frame scored against its truth frame by
@@ -171,7 +172,9 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     (light_objects); default: `objects`. estimates: per light estimator, its maps and objects (estimate.lit);
     at the saved frames the objects are also rendered lit by each, scored against the truth frame likewise.
     tracked: the frames' poses and tracking times from an earlier session over the same recording with the same
-    tracker (SessionResult.tracked gives them), which are not tracked again."""
+    tracker (SessionResult.tracked gives them), which are not tracked again. error_map: (truth frame, frame, mask) ->
+    the error map (H, W) whose mean over the mask is the score (or its Future); where given, the estimates' frames
+    hold their error maps ("errors": the estimates' frames show them) and their scores are those means."""
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code, settings)
     captured = _renderer(camera, maps, ctx, settings.method, objects)
@@ -191,6 +194,7 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     loop = FrameLoop(ctx, tracker, captured, shading, settings.overlay, settings.method, lights=settings.lights,
                      light_frames=count, tracked=tracked)
     pending = {}  # frame n -> its score (a Future where the scorer works beside the loop)
+    error_maps = {}  # (frame index, estimator) -> error_map's (or its Future)
     with (atomic_path(out_dir / "session.mp4") as video_path,
           _VideoWriter(video_path, fps, (camera.width, camera.height)) as video):
         frames = read_frames(rec.folder / rec.frames[k]["file"] for k in indices)  # (decoded ahead of the loop)
@@ -231,7 +235,10 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                     lit = {name: _lit_frame(r, pose, time_s, frame, settings, overlay_box, out) for name, r in estimated.items()}
                     estimate_frames[int(k)] = {"truth_frame": truth_frame, "mask": mask, "lit": lit}
                     for name, image in lit.items():
-                        estimate_scores[name][int(k)] = score(truth_frame, image, mask)
+                        if error_map is not None:  # (the map shown; its mean over the mask is the score)
+                            error_maps[int(k), name] = error_map(truth_frame, image, mask)
+                        else:
+                            estimate_scores[name][int(k)] = score(truth_frame, image, mask)
             video.write(out)
             if k in saved:
                 write_bytes_atomic(out_dir / "frames" / f"{k:06d}.png", png_bytes(out))
@@ -240,6 +247,9 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     for n, value in pending.items():
         flips[n] = _value(value)
     estimate_scores = {name: {k: _value(v) for k, v in scores.items()} for name, scores in estimate_scores.items()}
+    for (k, name), error in error_maps.items():
+        error = estimate_frames[k].setdefault("errors", {})[name] = _value(error)
+        estimate_scores[name][k] = float(error[estimate_frames[k]["mask"]].mean())
     return SessionResult(indices, poses, flips, step_ms, gl_ms, records, estimate_frames, estimate_scores,
                          true_light is not None)
 

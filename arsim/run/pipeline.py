@@ -89,8 +89,8 @@ STAGE_CODE = {
     "estimates": ("arsim.estimate.series", "arsim.estimate.platforms", "arsim.estimate.shapes", "arsim.estimate.single_frame",
                   "arsim.evaluate.estimates", "arsim.capture.pipeline", "arsim.sensors.frames"),
     "maps": ("arsim.lighting.methods", "arsim.lighting.bake_output", "arsim.lighting.mapset", "arsim.evaluate.metrics",
-             "arsim.core.gl", "arsim.core.conventions"),
-    "session": ("arsim.render.session", "arsim.render.content", "arsim.evaluate.diff", "arsim.evaluate.profile",
+             "arsim.evaluate.compare_methods", "arsim.core.gl", "arsim.core.conventions"),
+    "session": ("arsim.render.session", "arsim.render.content", "arsim.evaluate.flip", "arsim.evaluate.profile",
                 "arsim.evaluate.session", "arsim.estimate.lit", "arsim.evaluate.estimates"),
     "report": ("arsim.run.report", "arsim.evaluate.estimates", "arsim.evaluate.session", "arsim.scenario.loader"),
 }
@@ -417,8 +417,9 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     figures the report shows beside the run's. The recording made (or reused) is read where it lies while the run
     works; its frame images are left out of out at the end unless keep_recording (README: Run outputs and disk)."""
     from arsim.capture.pipeline import CaptureSettings, recording_scenario
-    from arsim.evaluate.diff import flip_scorer
+    from arsim.evaluate.compare_methods import maps_figures
     from arsim.evaluate.estimates import estimate_summary, write_estimate_frames
+    from arsim.evaluate.flip import flip_worker
     from arsim.evaluate.profile import ProfileRun, write_profile
     from arsim.evaluate.session import lit_by_truth, session_metrics
     from arsim.lighting.bake_output import write_bake
@@ -531,6 +532,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
                         "method_error_on_truth_pct": map_error(reference[e][inside], true_maps[e][inside]).mean_percent,
                     } for e, s in enumerate(exponents)}}
             gl.release()
+            maps_figures(maps, truth_maps, out / "maps")
         return {"maps": maps, "truth_maps": truth_maps, "metrics": map_metrics, "gl_renderer": gl_renderer}
 
     baked, _ = stages.run("maps", keys["maps"], f"4/6 baking the maps ({', '.join(methods)})", make_maps, _save_maps, _load_maps)
@@ -547,13 +549,13 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         tracked_as["key"] = tracking_key(scenario, keys["capture"], session_settings.every)
         hit = cache.lookup("tracking", tracked_as["key"])
         tracked_as["status"] = "reused" if hit is not None else "computed"
-        with step("session", description) as update, flip_scorer() as score:
+        with step("session", description) as update, flip_worker() as flip:
             session = run_session(ar, captured.response.linear[:, 1], maps, baked["truth_maps"] if truth is not None else None,
-                                  out, light_objects(objects, probe), score, session_settings,
+                                  out, light_objects(objects, probe), flip.score, session_settings,
                                   truth_objects=light_objects(objects, truth) if truth is not None else None,
                                   progress=lambda f: update(completed=f),
                                   estimates=estimate_lights(estimates.final, needed, objects, r.map_size),
-                                  tracked=_load_tracked(hit.state) if hit is not None else None)
+                                  tracked=_load_tracked(hit.state) if hit is not None else None, error_map=flip.error_map)
             if hit is None:
                 cache.store("tracking", tracked_as["key"], out, [], lambda folder: _save_tracked(session.tracked(), folder))
             (out / "profile").mkdir(exist_ok=True)

@@ -15,15 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from arsim.core.files import atomic_path, write_text_atomic
-from arsim.core.hdr_io import tonemap_preview
 from arsim.core.png import png_bytes, read_frame
-from arsim.evaluate.compare_methods import maps_grid, method_label
 from arsim.evaluate.diff import compare_images, magma
-from arsim.evaluate.metrics import relative_error
 from arsim.evaluate.registry import figures_of, label_of, metric_for, unit_text, verdicts, worse_beyond_tolerance
 from arsim.evaluate.tracking import TrackingRun
 from arsim.lighting.mapset import MapSet
-from arsim.lighting.methods import MapParameters  # (the run bakes with the defaults)
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
@@ -132,46 +128,6 @@ cubemap for reflections.</p>
 PAGE_WIDTH = 1400  # pixels: the widest image the report embeds at full size
 
 
-def plot_maps_vs_truth(maps: MapSet, truth: MapSet, path: Path) -> None:
-    """Per exponent: the map from the captured probe, the truth's (both tone-mapped on one scale, so that they
-    compare), and the per-texel relative error (metrics.relative_error, mean over RGB, %) with a colour bar."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    exponents = [s for s in maps.exponents if s in truth.maps]
-    fig, axes = plt.subplots(3, len(exponents), figsize=(1.9 * len(exponents) + 1.2, 6.0), dpi=100, squeeze=False)
-    errors = []
-    for j, s in enumerate(exponents):
-        a, b = truth.maps[s], maps.maps[s]
-        inside = a.sum(axis=-1) > 0
-        both = tonemap_preview(np.concatenate([b, a], axis=1))
-        n = a.shape[1]
-        err = np.full(a.shape[:2], np.nan)
-        err[inside] = 100 * relative_error(a[inside], b[inside]).mean(axis=-1)
-        errors.append(err)
-        for i, (image, label) in enumerate(((both[:, :n], "captured"), (both[:, n:], "truth"))):
-            axes[i, j].imshow(image)
-            if j == 0:
-                axes[i, j].set_ylabel(label, fontsize=9)
-        axes[0, j].set_title("irradiance" if s == 1 else f"s = {s:g}", fontsize=9)
-    top = max(1.0, float(np.nanpercentile(np.concatenate([e[np.isfinite(e)] for e in errors]), 99)))
-    for j, err in enumerate(errors):
-        shown = axes[2, j].imshow(err, cmap="magma", vmin=0.0, vmax=top)
-        axes[2, j].set_xlabel(f"mean {np.nanmean(err):.2f} %", fontsize=8)
-    axes[2, 0].set_ylabel("error", fontsize=9)
-    for ax in axes.ravel():
-        ax.set_xticks([])
-        ax.set_yticks([])
-    fig.colorbar(shown, ax=axes[2, :].tolist(), fraction=0.02, pad=0.01, label="relative error (%)")
-    fig.suptitle(f"{maps.method} maps from the captured probe against the true environment's (error: the colour "
-                 "bar's top is the 99th percentile)", fontsize=10)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
-    plt.close(fig)
-
-
 def frame_vs_truth(frame: Path, truth: Path, path: Path) -> float | None:
     """The frame, its truth frame and the FLIP map between them side by side (magma, with a colour bar drawn
     beside it, its top written on it); returns the FLIP mean over the frame (None: the frames are equal)."""
@@ -261,13 +217,9 @@ def write_report(out: Path, scenario: Scenario, source: str, metrics: dict, trac
     report.mkdir(exist_ok=True)
     absent = metrics.get("truth", {})
     no_poses, no_scene = absent.get("groundtruth"), absent.get("scenario")
-    exponents = next(iter(maps.values())).exponents
-    maps_grid({method_label(name, MapParameters(), exponents): np.stack([m[s] for s in exponents]) for name, m in maps.items()}, exponents,
-              report / "maps.png", "Irradiance (s = 1) and reflection maps baked from the captured probe")
+    # (the maps' figures are drawn by the maps stage, maps_figures: a run that reuses the maps reuses them)
     compared = [name for name in maps if truth_maps and name in truth_maps]  # [render] method's first
     compared.sort(key=lambda name: name != scenario.render.method)
-    for name in compared:
-        plot_maps_vs_truth(maps[name], truth_maps[name], report / f"maps_vs_truth_{name}.png")
     if tracking.measured:
         plot_tracking(tracking, frames, report / "tracking.png")
     s = metrics["session"]
@@ -316,7 +268,7 @@ costs), against the true environment's exact (accurate) maps (capture and method
 error on the true environment. Accurate and bounds maps are baked on the GL path (float32, held to the NumPy float64
 sums within 1e-3 by the tests).</p>
 {_table(['method', 'map', 'vs truth, same method (%)', 'vs truth, accurate (%)', 'method on truth (%)'], map_rows)}
-{''.join(_img(report / f'maps_vs_truth_{name}.png', f'{name} maps against the truth', 1100) for name in compared)}"""
+{''.join(_img(out / 'maps' / f'vs_truth_{name}.png', f'{name} maps against the truth', 1100) for name in compared)}"""
     truth_note = "".join(f"<li>{html.escape(_why(why))}</li>" for why in absent.values())
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>arsim run: {html.escape(scenario.run.name)}</title>
@@ -339,7 +291,7 @@ lost in {lost} of them (no object drawn there); {scored}.</p>
 {_img(out / 'capture' / 'coverage.png', 'coverage', 500)}
 {estimates}
 <h2 id="maps">Maps</h2><p>Baked from the captured probe (maps/&lt;method&gt;/), each shown by Reinhard's operator.</p>
-{_img(report / 'maps.png', 'maps', 1100)}
+{_img(out / 'maps' / 'maps.png', 'maps', 1100)}
 {maps_table}
 <h2 id="frames">AR frames</h2><p>{scored}.</p>{''.join(figures)}
 <h2 id="figures">Every figure</h2>

@@ -24,7 +24,7 @@ from arsim.core.files import json_text, write_text_atomic
 from arsim.core.progress import quiet_stage
 from arsim.core.resample import to_layout
 from arsim.evaluate.capture_report import write_capture
-from arsim.evaluate.diff import flip_scorer
+from arsim.evaluate.flip import flip_worker
 from arsim.evaluate.profile import ProfileRun, write_profile
 from arsim.evaluate.recording_plots import plot_ar_path, plot_recording
 from arsim.evaluate.session import lit_by_truth, session_metrics
@@ -262,8 +262,8 @@ def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map
     with stage(f"computing the maps ({', '.join(needed)})"):
         maps = maps if maps is not None else session_maps(probe, needed, source)
         truth_maps = session_maps(truth, needed, "truth") if truth is not None else None
-    with stage(f"rendering the AR session ({', '.join(needed)} maps)") as update, flip_scorer() as score:
-        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), score,
+    with stage(f"rendering the AR session ({', '.join(needed)} maps)") as update, flip_worker() as flip:
+        session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), flip.score,
                               settings, truth_objects=light_objects(objects, truth) if truth is not None else None,
                               progress=lambda f: update(completed=f))
     metrics = session_metrics(ar, session)[1] | {"method": settings.method, "methods": needed, "map_size": map_size,
