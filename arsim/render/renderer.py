@@ -8,8 +8,7 @@ so that the rectangle's corner lands on the tile's. Clearing the tile, the tone 
 tone mapping then cost what the objects cover, not what the frame does (on llvmpipe, a 1280 x 720
 RGBA16F clear and mip chain take 5 ms; a fullscreen pass 2 ms): each runs on the objects' own
 rectangles (merge_rects). The average is summed in blocks into a target AVERAGE_BLOCK times smaller on
-each side, also a power of two, so that every level of its mip chain halves exactly and its top is the
-mean of the tile.
+each side, whose texels over the blocks' box one fragment then sums into a 1 x 1 total (average_sum.frag).
 
 Images come back with row 0 at the top (OpenCV's convention); GL's framebuffer rows are bottom-up.
 """
@@ -171,10 +170,11 @@ class _Drawable:
 
 
 # The tone mapper's average is summed in blocks of this many pixels a side, over the objects' rectangles
-# only, into a target this many times smaller on each side than the tile, whose mip chain gives the mean:
+# only, into a target this many times smaller on each side than the tile, whose texels one fragment sums:
 # on llvmpipe the RGBA16F mip chain of a whole tile took 3 ms a frame (median; 13 at worst), the tile
-# mostly the space between the objects; the blocks and their chain take 0.5-1 ms (8 measured a little
-# faster than 4: fewer fragments, a shorter chain).
+# mostly the space between the objects; the blocks and a mip chain of their target took 0.5-1 ms (8
+# measured a little faster than 4), the chain alone 0.5-0.7 ms whatever its size (a blit per level), and
+# the one-fragment sum instead took the step from 2.5 to 1.9-2.0 times its floor (benchmarks/bench_render.py).
 AVERAGE_BLOCK = 8
 
 
@@ -190,6 +190,8 @@ class _Tile:
     zeros: bytes  # an HDR tile of zeros
     average: object
     average_fbo: object
+    total: object  # 1 x 1: the average target's sums (average_sum.frag), what the tone mapper reads
+    total_fbo: object
     debug: list = field(default_factory=list)
     dirty: list = field(default_factory=list)  # the rectangles (x, y, w, h) written since the tile was zeroed
 
@@ -295,6 +297,7 @@ class Renderer:
         self._rgba = np.empty((camera.height, camera.width, 4), np.uint8)
         self.output_fbo = self.ctx.framebuffer([self.output])
         self.tonemappers = {}
+        self._sum_program = None
         self._rect_arrays = {}  # per program (by id: each is kept in tonemappers), the rectangles' buffer and vertex array
         self._ggx_cache = {}  # GGX materials' prefiltered cube maps (per chain) and the split sum's table
         self._cube_writer = None
@@ -632,8 +635,9 @@ class Renderer:
             fbo = self.ctx.framebuffer([hdr, *debug], depth)
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)  # (a new texture's content is undefined)
             average = self.ctx.texture((size[0] // AVERAGE_BLOCK, size[1] // AVERAGE_BLOCK), 2, dtype="f4")
+            total = self.ctx.texture((1, 1), 2, dtype="f4")
             self.tiles[size] = _Tile(hdr, fbo, self.ctx.framebuffer(debug, depth), bytes(size[0] * size[1] * 8),
-                                     average, self.ctx.framebuffer([average]), debug)
+                                     average, self.ctx.framebuffer([average]), total, self.ctx.framebuffer([total]), debug)
         return self.tiles[size]
 
     def no_objects(self) -> None:
@@ -692,8 +696,12 @@ class Renderer:
             self.tonemappers[log_average] = (average, program)
         return self.tonemappers[log_average]
 
-    def top_level(self) -> int:
-        return int(np.log2(max(self.tile.average.width, self.tile.average.height)))
+    def _summer(self):
+        """The program that sums the average target's blocks into the tile's 1 x 1 total (average_sum.frag)."""
+        if self._sum_program is None:
+            self._sum_program = self.ctx.program(vertex_shader=_source("blocks.vert", []),
+                                                 fragment_shader=_source("average_sum.frag", []))
+        return self._sum_program
 
     def _draw_rects(self, program, rects: np.ndarray) -> None:
         """Two triangles per rectangle (x0, y0, x1, y1) with the program, into the framebuffer in use. The
@@ -712,8 +720,9 @@ class Renderer:
         vao.render(vertices=6 * len(rects))
 
     def _average_pass(self, program) -> None:
-        """The masked pixels' average into the top of the tile's average chain: the blocks that hold the
-        objects' rectangles summed into the average target (zeros elsewhere), then its mip chain."""
+        """The masked pixels' average into the tile's total: the blocks that hold the objects' rectangles
+        summed into the average target (zeros elsewhere), then the target's texels over the blocks' box
+        summed into the 1 x 1 total (average_sum.frag)."""
         tile, b = self.tile, AVERAGE_BLOCK
         tile.average_fbo.use()
         tile.average_fbo.clear(0.0, 0.0, 0.0, 0.0)
@@ -724,7 +733,15 @@ class Renderer:
         program["hdr"].value = 0
         program["target_size"].value = tile.average.size
         self._draw_rects(program, blocks)
-        tile.average.build_mipmaps()
+        summer = self._summer()
+        tile.total_fbo.use()
+        tile.average.use(0)
+        summer["blocks"].value = 0
+        width, height = tile.average.size
+        summer["box"].value = (max(int(blocks[:, 0].min()), 0), max(int(blocks[:, 1].min()), 0),
+                               min(int(blocks[:, 2].max()), width), min(int(blocks[:, 3].max()), height))
+        summer["target_size"].value = (1, 1)
+        self._draw_rects(summer, np.array([(0, 0, 1, 1)]))
 
     def tonemap(self, background: np.ndarray, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> np.ndarray:
         """Steps 4 and 6: the camera frame (H, W, 3) uint8 with Reinhard's operator on the masked pixels
@@ -744,11 +761,10 @@ class Renderer:
             return
         average, program = self._tonemapper(log_average)
         self._average_pass(average)
-        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("average", self.tile.average)]):
+        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("average", self.tile.total)]):
             tex.use(unit)
             program[name].value = unit
         program["key"].value, program["white"].value = key, white
-        program["top_level"].value = self.top_level()
         program["origin"].value = self.rect[:2]
         program["frame_size"].value = (self.camera.width, self.camera.height)
         program["frame_height"].value = self.camera.height
@@ -844,8 +860,8 @@ class Renderer:
         return tuple(self._read(t, 4, "f4") for t in self.tile.debug)
 
     def mip_average(self, log_average: bool = False) -> float:
-        """The average luminance of the masked pixels as the tone mapper reads it from the top of the
-        tile's average chain (after a tonemap pass with the same log_average)."""
-        value, coverage = self._read(self.tile.average, 2, "f4", self.top_level())[0, 0]
+        """The average luminance of the masked pixels as the tone mapper reads it from the tile's total
+        (after a tonemap pass with the same log_average)."""
+        value, coverage = np.frombuffer(self.tile.total.read(), np.float32)
         mean = value / max(coverage, 1e-12)
         return float(np.exp(mean) if log_average else mean)

@@ -156,8 +156,9 @@ def volume_diffuse(volume: tuple, points: np.ndarray, normals: np.ndarray) -> np
 
 
 def average_luminance(hdr: np.ndarray, mask: np.ndarray, log_average: bool = False) -> float:
-    """The scene's average luminance over the masked pixels: their mean, what the top of the mip chain
-    gives (thesis 5.3.4), or Reinhard's log-average exp(mean(log(delta + L_w)))."""
+    """The scene's average luminance over the masked pixels: their mean, what the top of a mip chain
+    gives (thesis 5.3.4; the renderer sums blocks instead, to the same value), or Reinhard's log-average
+    exp(mean(log(delta + L_w)))."""
     luminance = hdr[..., :3] @ TONEMAP_LUMA
     inside = np.asarray(mask) > 0.5
     if not inside.any():
