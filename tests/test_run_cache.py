@@ -120,6 +120,9 @@ def test_a_render_setting_renders_again_with_the_poses_tracked_before_byte_ident
     sessions = [json.loads((run / "manifest.json").read_text())["stages"]["session"] for run in (render, fresh)]
     assert sessions[0]["tracking"]["status"] == "reused" and sessions[1]["tracking"]["status"] == "computed"
     assert sessions[0]["tracking"]["key"] == sessions[1]["tracking"]["key"]
+    # the estimates' maps too: made from the same estimates for the same objects and size
+    assert sessions[0]["lit_maps"]["status"] == "reused" and sessions[1]["lit_maps"]["status"] == "computed"
+    assert sessions[0]["lit_maps"]["key"] == sessions[1]["lit_maps"]["key"]
     differing = _differing(render, fresh)
     assert all(any(fnmatch.fnmatch(name, p) for p in TIMED_FILES) for name in differing), differing
     assert "session.mp4" in _files(render) and "frames/000000.png" in _files(render)
@@ -132,6 +135,33 @@ def test_a_render_setting_renders_again_with_the_poses_tracked_before_byte_ident
 def test_a_capture_setting_recomputes_the_capture_and_later_stages(runs):
     assert _status(runs["root"] / "capture")["recording"] == "reused"
     assert _computed(runs["root"] / "capture") == LATER["capture"]
+    # other estimates: the estimates' maps are made again
+    lit = [json.loads((runs["root"] / run / "manifest.json").read_text())["stages"]["session"]["lit_maps"]
+           for run in ("capture", "render")]
+    assert lit[0]["status"] == "computed" and lit[0]["key"] != lit[1]["key"]
+
+
+def test_the_estimates_maps_are_keyed_by_what_they_are_made_from_and_round_trip(tmp_path):
+    import numpy as np
+
+    from arsim.lighting.mapset import MapSet
+    from arsim.run.pipeline import _load_lit_maps, _save_lit_maps, lit_maps_key
+
+    base = lit_maps_key("e", {"fast": [1.0, 80.0]}, 128)
+    assert base == lit_maps_key("e", {"fast": [80, 1]}, 128)  # (the exponents' order and type do not count)
+    changed = {lit_maps_key("f", {"fast": [1.0, 80.0]}, 128), lit_maps_key("e", {"fast": [1.0, 40.0]}, 128),
+               lit_maps_key("e", {"mipmap": [1.0, 80.0]}, 128), lit_maps_key("e", {"fast": [1.0, 80.0]}, 64)}
+    assert base not in changed and len(changed) == 4
+    rng = np.random.default_rng(0)
+    maps = {name: {m: MapSet(m, {s: rng.random((8, 8, 3)).astype(np.float32) for s in (1.0, 80.0, 1280.0)}, f"{name} estimate")
+                   for m in ("fast", "mipmap")} for name in ("capture", "single")}
+    _save_lit_maps(maps, tmp_path / "state")
+    loaded = _load_lit_maps(tmp_path / "state")
+    assert loaded.keys() == maps.keys()
+    for name, sets in maps.items():
+        for m, ms in sets.items():
+            assert loaded[name][m].source == ms.source and loaded[name][m].exponents == ms.exponents
+            assert all(np.array_equal(loaded[name][m][s], ms[s]) and loaded[name][m][s].dtype == np.float32 for s in ms.exponents)
 
 
 def test_a_corrupted_entry_is_detected_and_computed_again(runs, tmp_path):
@@ -160,8 +190,8 @@ def test_cache_info_and_clear(runs, tmp_path):
     cache = tmp_path / "cache"
     shutil.copytree(runs["root"] / "cache", cache)
     info = json.loads(arsim("cache", "info", "--cache", cache, "--json").stdout)
-    # (the session's tracking has entries of its own)
-    assert set(info["stages"]) == set(STAGES) | {"tracking"} and info["entries"] >= 9 and info["bytes"] > 0
+    # (the session's tracking and the estimates' maps have entries of their own)
+    assert set(info["stages"]) == set(STAGES) | {"tracking", "lit_maps"} and info["entries"] >= 9 and info["bytes"] > 0
     assert info["stages"]["recording"]["entries"] == 1 and info["stages"]["capture"]["entries"] == 2
     r = arsim("cache", "clear", "--cache", cache)
     assert r.returncode == 0 and f"removed {info['entries']} entries" in r.stdout

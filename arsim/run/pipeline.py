@@ -152,6 +152,33 @@ def tracking_key(scenario: Scenario, capture_key: str, every: int) -> str:
                                "every": every, "code": code_digest(TRACKING_CODE, RUN_FILES)})
 
 
+# The estimates' maps: the session reuses them where the estimates, the maps the objects need, their size and
+# this code are the same (a change in [render] key, white or the like renders again without making them again).
+LIT_MAPS_CODE = ("arsim.estimate.lit",)
+
+
+def lit_maps_key(estimates_key: str, needed: dict[str, list[float]], map_size: int) -> str:
+    """The key of the estimates' maps (stages.lit_maps): the estimates' key, the methods and exponents the
+    objects need, the maps' size and estimate.lit's code."""
+    return key_of("lit_maps", {"estimates": estimates_key, "needed": {m: sorted(map(float, e)) for m, e in needed.items()},
+                               "map_size": map_size, "code": code_digest(LIT_MAPS_CODE, RUN_FILES)})
+
+
+def _save_lit_maps(maps: dict[str, dict], folder: Path) -> None:
+    """stages.lit_maps' MapSets as arrays, named estimator/method/exponent."""
+    write_state(folder, {name: {m: {"source": ms.source, "exponents": list(ms.exponents)} for m, ms in sets.items()}
+                         for name, sets in maps.items()},
+                {f"{name}|{m}|{s!r}": ms[s] for name, sets in maps.items() for m, ms in sets.items() for s in ms.exponents})
+
+
+def _load_lit_maps(folder: Path) -> dict[str, dict]:
+    from arsim.lighting.mapset import MapSet
+
+    data, a = read_state(folder)
+    return {name: {m: MapSet(m, {float(s): a[f"{name}|{m}|{float(s)!r}"] for s in d["exponents"]}, d["source"])
+                   for m, d in sets.items()} for name, sets in data.items()}
+
+
 def _save_tracked(tracked: dict, folder: Path) -> None:
     """The session's poses per frame (render.session.SessionResult.tracked) as arrays; None as NaN."""
     k = sorted(tracked)
@@ -428,7 +455,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     from arsim.render.content import light_objects, scene_objects
     from arsim.render.session import SessionSettings, run_session
     from arsim.run.report import write_report
-    from arsim.run.stages import (estimate_lights, estimated_sweep, filled_probe, measured_capture, recorded_pair,
+    from arsim.run.stages import (estimate_lights, estimated_sweep, filled_probe, lit_maps, measured_capture, recorded_pair,
                                   true_probe, with_scenario)
     from arsim.sensors.frames import truth_absent
     from arsim.sensors.recording import record, recording_segments
@@ -541,6 +568,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     # 5. The AR session over the AR path (the objects also lit by each light estimate at the frames shown),
     # its render-loop profile, and the frames lit by each estimate.
     tracked_as: dict = {}  # (the session's tracking: reused or computed, for the manifest)
+    lit_as: dict = {}  # (the estimates' maps: reused or computed, likewise)
 
     def make_session(description):
         session_settings = with_scenario(SessionSettings(r.method, r.key, r.white, r.log_average, overlay=r.overlay,
@@ -549,12 +577,19 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         tracked_as["key"] = tracking_key(scenario, keys["capture"], session_settings.every)
         hit = cache.lookup("tracking", tracked_as["key"])
         tracked_as["status"] = "reused" if hit is not None else "computed"
+        lit_as["key"] = lit_maps_key(keys["estimates"], needed, r.map_size)
+        lit_hit = cache.lookup("lit_maps", lit_as["key"])
+        lit_as["status"] = "reused" if lit_hit is not None else "computed"
+        estimate_maps = (_load_lit_maps(lit_hit.state) if lit_hit is not None
+                         else lit_maps(estimates.final, needed, r.map_size))
+        if lit_hit is None:
+            cache.store("lit_maps", lit_as["key"], out, [], lambda folder: _save_lit_maps(estimate_maps, folder))
         with step("session", description) as update, flip_worker() as flip:
             session = run_session(ar, captured.response.linear[:, 1], maps, baked["truth_maps"] if truth is not None else None,
                                   out, light_objects(objects, probe), flip.score, session_settings,
                                   truth_objects=light_objects(objects, truth) if truth is not None else None,
                                   progress=lambda f: update(completed=f),
-                                  estimates=estimate_lights(estimates.final, needed, objects, r.map_size),
+                                  estimates=estimate_lights(estimates.final, needed, objects, r.map_size, estimate_maps),
                                   tracked=_load_tracked(hit.state) if hit is not None else None, error_map=flip.error_map)
             if hit is None:
                 cache.store("tracking", tracked_as["key"], out, [], lambda folder: _save_tracked(session.tracked(), folder))
@@ -572,6 +607,7 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
     session, _ = stages.run("session", keys["session"], "5/6 rendering the AR session", make_session, _save_session, _load_session)
     if tracked_as:  # (the session computed: its tracking reused from a session of other [render] settings, or done now)
         stages.record["session"]["tracking"] = tracked_as
+        stages.record["session"]["lit_maps"] = lit_as
 
     # 6. Metrics, report and manifest.
     metrics = {"capture": {k: v for k, v in captured.metrics.items() if not isinstance(v, (list, dict)) or k == "warnings"},

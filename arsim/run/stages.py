@@ -155,13 +155,22 @@ def estimated_sweep(rec: Recording, out: Path, given: list[dict] | None = None, 
     return SweepEstimates(figures, final, None if truth is not None else truth_absent(rec)["scenario"])
 
 
-def estimate_lights(final: dict, needed: dict[str, list[float]], objects: list, map_size: int) -> dict:
+def estimate_lights(final: dict, needed: dict[str, list[float]], objects: list, map_size: int,
+                    maps: dict[str, dict] | None = None) -> dict:
     """Per estimator, the maps and objects its estimate lights the AR session's objects with (estimate.lit:
-    the maps from its SH, main light and cubemap; what is baked from a light, from its cubemap)."""
-    from arsim.estimate.lit import environment, estimate_maps
+    the maps from its SH, main light and cubemap; what is baked from a light, from its cubemap). maps:
+    lit_maps' (made before), else made here."""
+    from arsim.estimate.lit import environment
 
-    return {name: (estimate_maps(e, needed, map_size, f"{name} estimate"), light_objects(objects, environment(e, map_size)))
-            for name, e in final.items()}
+    maps = lit_maps(final, needed, map_size) if maps is None else maps
+    return {name: (maps[name], light_objects(objects, environment(e, map_size))) for name, e in final.items()}
+
+
+def lit_maps(final: dict, needed: dict[str, list[float]], map_size: int) -> dict[str, dict]:
+    """Per estimator, its maps per map method the objects need (estimate.lit.estimate_maps)."""
+    from arsim.estimate.lit import estimate_maps
+
+    return {name: estimate_maps(e, needed, map_size, f"{name} estimate") for name, e in final.items()}
 
 
 def single_frame_estimates(rec: Recording, response, progress=lambda fraction: None) -> list:
