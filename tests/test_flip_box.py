@@ -63,3 +63,17 @@ def test_objects_apart_slanted_and_at_the_frames_edge_get_their_full_frame_value
     # the same values as the error map's over the mask, to the bit: the session takes an estimate's score as
     # the mean of the map it shows
     assert masked_flip(a, b, mask) == float(flip_map(a, b, mask)[mask].mean())
+
+
+def test_the_workers_scores_are_masked_flips_and_an_interruption_drops_the_rest(frames):
+    from arsim.evaluate.flip import flip_worker
+
+    a, b, where = frames
+    with flip_worker() as flip:
+        assert flip.score(a, b, where).result() == masked_flip(a, b, where)
+        assert np.array_equal(flip.error_map(a, b, where).result(), flip_map(a, b, where))
+    with pytest.raises(KeyboardInterrupt):
+        with flip_worker() as flip:
+            futures = [flip.score(a, b, where) for _ in range(40)]
+            raise KeyboardInterrupt
+    assert any(f.cancelled() for f in futures)  # (not all 40 computed before the worker stopped)

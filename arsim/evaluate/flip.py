@@ -120,5 +120,10 @@ def flip_worker() -> Iterator[FlipWorker]:
     if main_file is not None and not os.path.isfile(main_file):  # (a script read from stdin: a spawned worker
         yield FlipWorker(_done)  # cannot import it; computed in turn)
         return
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_passive_openmp) as pool:
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_passive_openmp)
+    try:
         yield FlipWorker(pool.submit)
+    except BaseException:  # (interrupted: the FLIP not yet begun is dropped, not waited for)
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
