@@ -201,6 +201,24 @@ def test_the_torus_occlusion_is_open_on_top_and_closed_where_it_touches_the_tabl
     assert ao[row(0.5)].mean() < ao[row(0.01)].mean() - 0.1
 
 
+def test_the_compiled_torus_occlusion_traces_as_the_numpy_sphere_trace():
+    """The occlusion bake's compiled march counts, per origin, the rays that the NumPy sphere_trace (the
+    oracle) finds hitting the torus or the table: on and above the torus and on the table, rays every way."""
+    from arsim.render.content import _torus_scene_hits, scene_distance, sphere_trace, torus_texels
+
+    major, minor = 0.05, 0.02
+    point, normal, _ = torus_texels(major, minor, (8, 16))
+    rng = np.random.default_rng(4)
+    origins = np.concatenate([(point + normal * 1e-3 * minor).reshape(-1, 3),
+                              rng.uniform([-0.1, 0.0005, -0.1], [0.1, 0.06, 0.1], (64, 3))])
+    directions = rng.normal(size=(32, len(origins), 3))
+    directions /= np.linalg.norm(directions, axis=-1, keepdims=True)
+    reach = 6.0 * (major + minor)
+    expected = sphere_trace(origins, directions, lambda p: scene_distance(p, major, minor), minor, reach).sum(axis=0)
+    assert 0 < expected.sum() < directions.shape[0] * len(origins)  # (some rays hit, some escape)
+    np.testing.assert_array_equal(_torus_scene_hits(origins, directions, major, minor, reach, 96), expected)
+
+
 def test_vertex_tangents_follow_increasing_u():
     """Tangents from the UVs (Lengyel) equal the parametric surfaces' own: east on a sphere (away from
     its poles, where longitudes meet), along the ring on the torus; on the seam, where a vertex has

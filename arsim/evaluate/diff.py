@@ -30,7 +30,6 @@ IMAGE_SUFFIXES = (".png",)
 DEFAULT_MAX_FLIP = 0.0  # a frame fails when its mean FLIP exceeds this: by default, any difference
 
 
-
 @dataclass(frozen=True)
 class FrameDiff:
     name: str

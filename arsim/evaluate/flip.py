@@ -70,14 +70,13 @@ def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> fl
         # A group cut into bands of rows, each with the box of its own pixels widened by FLIP_RADIUS: a group
         # that runs at a slant (the row of spheres seen from the side) leaves most of its box empty otherwise.
         for top in range(0, h, FLIP_BAND):
-            scored = np.zeros_like(group)
-            scored[top:top + FLIP_BAND] = group[top:top + FLIP_BAND]
-            if scored.any():
-                box = flip_box(scored, FLIP_RADIUS)
-                box = np.s_[y + box[0].start:y + box[0].stop, x + box[1].start:x + box[1].stop]
-                pixels = np.zeros(mask.shape, bool)
-                pixels[y:y + h, x:x + w] = scored
-                error[pixels] = _flip(reference[box], test[box])[pixels[box]]
+            band = np.zeros_like(group)
+            band[top:top + FLIP_BAND] = group[top:top + FLIP_BAND]
+            if band.any():
+                rows, cols = flip_box(band, FLIP_RADIUS)  # (in the group's box: its margin lies inside it)
+                box = np.s_[y + rows.start:y + rows.stop, x + cols.start:x + cols.stop]
+                scored = band[rows, cols]
+                error[box][scored] = _flip(reference[box], test[box])[scored]
     return float(error[mask].mean())
 
 

@@ -580,11 +580,12 @@ def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | N
         lit_as["key"] = lit_maps_key(keys["estimates"], needed, r.map_size)
         lit_hit = cache.lookup("lit_maps", lit_as["key"])
         lit_as["status"] = "reused" if lit_hit is not None else "computed"
-        estimate_maps = (_load_lit_maps(lit_hit.state) if lit_hit is not None
-                         else lit_maps(estimates.final, needed, r.map_size))
-        if lit_hit is None:
-            cache.store("lit_maps", lit_as["key"], out, [], lambda folder: _save_lit_maps(estimate_maps, folder))
         with step("session", description) as update, flip_worker() as flip:
+            if lit_hit is not None:
+                estimate_maps = _load_lit_maps(lit_hit.state)
+            else:
+                estimate_maps = lit_maps(estimates.final, needed, r.map_size)
+                cache.store("lit_maps", lit_as["key"], out, [], lambda folder: _save_lit_maps(estimate_maps, folder))
             session = run_session(ar, captured.response.linear[:, 1], maps, baked["truth_maps"] if truth is not None else None,
                                   out, light_objects(objects, probe), flip.score, session_settings,
                                   truth_objects=light_objects(objects, truth) if truth is not None else None,
