@@ -123,7 +123,7 @@ class FloorRenderer(Renderer):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--frames", type=int, default=60, help="frames spread over the path (default 60)")
+    parser.add_argument("--frames", type=int, default=180, help="frames spread over the path (default 180)")
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--height", type=int, default=720)
     parser.add_argument("--log-average", action="store_true", help="tone-map with the log-average (default: [render] log_average)")

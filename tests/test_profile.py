@@ -39,7 +39,7 @@ def test_the_baked_maps_replace_the_ones_in_use_when_complete(probe):
 
     def held(s):
         texture = renderer.maps["mipmap", s]
-        return np.frombuffer(texture.read(), np.float32).reshape(texture.height, texture.width, 3)
+        return np.frombuffer(texture.read(), np.float32).reshape(texture.height, texture.width, texture.components)[..., :3]
 
     before = {s: held(s).copy() for s in EXPONENTS}
     steps = 0

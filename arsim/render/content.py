@@ -43,7 +43,7 @@ def torus_surface(u: np.ndarray, v: np.ndarray, major: float, minor: float) -> t
     return point, normal, tangent
 
 
-def torus(major: float = 0.05, minor: float = 0.02, rings: int = 96, segments: int = 48) -> Mesh:
+def torus(major: float = 0.05, minor: float = 0.02, rings: int = 16, segments: int = 8) -> Mesh:
     """The torus mesh; both UV sets are (u, v) (the light map is baked in the same parameterisation)."""
     u, v = np.meshgrid(np.linspace(0.0, 1.0, rings + 1), np.linspace(0.0, 1.0, segments + 1), indexing="ij")
     return grid_mesh(*torus_surface(u, v, major, minor), np.stack([u, v], axis=-1))
@@ -163,6 +163,20 @@ def _chord_gap(radius: float, steps_per_turn: int) -> float:
     return radius * (1.0 - np.cos(np.pi / steps_per_turn))
 
 
+def torus_proxy(major: float, minor: float, rings: int = 16, segments: int = 8) -> Mesh | None:
+    """A coarse closed mesh (rings x segments cells) that holds the torus, for the renderer to ray-cast it
+    through (README: Rendering speed): its tube a polygon about the tube's circle, widened by the sag of the
+    ring's chords (where a face spans two of the polygons it falls that far towards the axis). None where
+    that tube would reach the axis (a torus nearly a horn: the mesh would pass through itself)."""
+    sag = (major + 2.0 * minor) * (1.0 - np.cos(np.pi / rings)) / np.cos(np.pi / rings)
+    tube = (minor + sag) / np.cos(np.pi / segments)
+    if tube >= major:
+        return None
+    u, v = np.meshgrid(np.linspace(0.0, 1.0, rings + 1), np.linspace(0.0, 1.0, segments + 1), indexing="ij")
+    point, normal, tangent = torus_surface(u, v, major, minor)
+    return grid_mesh(point + normal * (tube - minor), normal, tangent, np.stack([u, v], axis=-1))
+
+
 def torus_lods(major: float, minor: float, rings: int) -> tuple[tuple[Mesh, float], ...]:
     """Coarser tori than rings x rings / 2, down to 16 x 8, with their departures from the torus (the ring's
     and the tube's chord gaps added). The steps are close (departures 1.2-1.5 times apart): the renderer
@@ -221,7 +235,7 @@ def parse_lighting(o) -> ObjectLighting:
     return ObjectLighting("inm", f"{basis.name}{count}")
 
 
-def disc(radius: float, rings: int = 16, segments: int = 96) -> Mesh:
+def disc(radius: float, rings: int = 16, segments: int = 8) -> Mesh:
     """A flat disc on the table (y slightly above 0), normal +y, tangent +x; both UV sets planar: u along
     +x, v along -z (the bitangent n x t), the disc inscribed in the unit square."""
     r, phi = np.meshgrid(np.linspace(0.0, radius, rings + 1), np.linspace(0.0, 2 * np.pi, segments + 1), indexing="ij")
@@ -257,8 +271,10 @@ def _torus_object(o, x: float, z: float, lighting: ObjectLighting) -> SceneObjec
     material = Material(o.kd, o.ks, o.exponent, bake_torus_occlusion(o.size_m, minor) if lighting.kind == "lightmap-ao" else None,
                         ridges_normal_map() if o.normal_map else None, o.method, basis=lighting.basis,
                         inm_terms=o.inm_terms or None)
+    proxy = torus_proxy(o.size_m, minor)
     return SceneObject(torus(o.size_m, minor), material, translation(x, 0.0, z), torus_lods(o.size_m, minor, 96),
-                       lightmap_surface=texels, distance=lambda p: torus_distance(p - offset, o.size_m, minor))
+                       lightmap_surface=texels, distance=lambda p: torus_distance(p - offset, o.size_m, minor),
+                       torus=(o.size_m, minor, proxy) if proxy is not None else None)
 
 
 def _disc_object(o, x: float, z: float, lighting: ObjectLighting) -> SceneObject:

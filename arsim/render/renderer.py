@@ -48,6 +48,15 @@ def _with_alpha(image: np.ndarray, dtype) -> np.ndarray:
     return out
 
 
+def _place(program, model: np.ndarray) -> None:
+    """A mesh object's program told where it stands: the model matrix, its normal matrix and, for a
+    ray-cast torus, its inverse (the ray into object space)."""
+    program["model"].write(model.T.astype("f4").tobytes())
+    program["normal_matrix"].write(np.linalg.inv(model[:3, :3]).astype("f4").tobytes())  # (inverse transpose, column-major)
+    if "object_from_world" in program:
+        program["object_from_world"].write(np.linalg.inv(model).T.astype("f4").tobytes())
+
+
 def _source(name: str, defines: list[str]) -> str:
     header = "#version 430\n" + "".join(f"#define {d}\n" for d in defines)
     shared = core_shader("anglemap.glsl") if name.endswith(".frag") else ""
@@ -133,6 +142,12 @@ class SceneObject:
     # light and normal maps it is drawn as a camera-facing quad that the fragment shader ray-casts (the
     # exact outline and normals, from two triangles: llvmpipe spends about a microsecond per triangle).
     sphere: float | None = None
+    # A torus (major and minor radius, object units; resting on y = 0 about the y axis), the mesh its
+    # tessellation, and a coarse mesh that holds it (content.torus_proxy): without PRT or a directional light
+    # map it is drawn as that mesh's faces, through which the fragment shader ray-casts the torus (the exact
+    # outline, normals and UVs from 256 triangles, where the fine mesh's small triangles cost llvmpipe its
+    # pixels shaded many times over).
+    torus: tuple[float, float, Mesh] | None = None
     # For baking its directional light map (irradiance normal mapping): its light map's texels in world
     # space (a lighting.bases.lightmap.Surface), and its distance function in world space (what it
     # occludes); None where it has none.
@@ -570,16 +585,20 @@ class Renderer:
             sphere = (obj.model[:3, 3].astype(np.float64), float(obj.sphere * scale))
             program["center"].value, program["radius"].value = tuple(sphere[0]), sphere[1]
             return program, vaos, sphere
+        if obj.torus is not None and m.directional_map is None and not m.prt_variant:
+            defines = defines + ["TORUS_IMPOSTOR"]  # (its light and normal maps read at the ray-cast hit's UVs)
+            meshes = (obj.torus[2],)
+        else:  # (per-vertex PRT coefficients are indexed by the mesh's vertices: no coarser meshes)
+            meshes = (obj.mesh, *(mesh for mesh, _ in obj.lods)) if "PRT_VERTEX" not in defines else (obj.mesh,)
         program = self.ctx.program(vertex_shader=_source("object.vert", defines), fragment_shader=_source("object.frag", defines))
         sizes = {"in_position": 3, "in_normal": 3, "in_tangent": 3, "in_uv": 2, "in_uv2": 2}
         used = [n for n in sizes if n in program]  # the compiler drops what a variant does not read
         layout = " ".join(f"{k}f" if n in used else f"{k}x4" for n, k in sizes.items())
-        # (per-vertex PRT coefficients are indexed by the mesh's vertices: no coarser meshes)
-        meshes = (obj.mesh, *(mesh for mesh, _ in obj.lods)) if "PRT_VERTEX" not in defines else (obj.mesh,)
         vaos = [self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.interleaved().tobytes()), layout, *used)],
                                       self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes())) for mesh in meshes]
-        program["model"].write(obj.model.T.astype("f4").tobytes())
-        program["normal_matrix"].write(np.linalg.inv(obj.model[:3, :3]).astype("f4").tobytes())  # (inverse transpose, column-major)
+        if "TORUS_IMPOSTOR" in defines:
+            program["torus_radii"].value = obj.torus[:2]
+        _place(program, obj.model)
         return program, vaos, None
 
     def _bind_units(self, program, method: str, m: Material, textures: dict) -> list:
@@ -612,7 +631,7 @@ class Renderer:
                 d.sphere = (model[:3, 3].astype(np.float64), d.sphere[1])
                 d.program["center"].value = tuple(d.sphere[0])
             else:
-                d.program["model"].write(model.T.astype("f4").tobytes())
+                _place(d.program, model)
             self.corners[k, :, :3] = d.corners[:, :3] + offset
 
     def screen_rects(self, view_projection: np.ndarray) -> list[tuple[int, int, int, int]]:

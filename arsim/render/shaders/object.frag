@@ -45,6 +45,12 @@ uniform vec3 center;                // world
 uniform float radius;
 uniform mat4 view_projection;
 #endif
+#ifdef TORUS_IMPOSTOR
+uniform mat4 object_from_world;     // the inverse of the model matrix
+uniform mat3 normal_matrix;
+uniform vec2 torus_radii;           // major, minor (object units): resting on y = 0 about the y axis
+uniform mat4 view_projection;
+#endif
 
 in vec3 v_world;
 in vec3 v_normal;
@@ -82,6 +88,91 @@ vec3 lookup(sampler2D map, vec3 d) {
 #endif
 }
 
+#ifdef TORUS_IMPOSTOR
+float cube_root(float x) {
+    return sign(x) * pow(abs(x), 1.0 / 3.0);
+}
+
+// The torus along the ray from the eye in world direction v: the nearest hit in front of the eye, its
+// world point, normal and tangent (along increasing u) and its (u, v) as content.torus_surface has them;
+// false where the ray misses. In object space, lengths in major radii and s measured from the ray's
+// point nearest the torus's centre (coefficients of order 1), the quartic
+// (|p|^2 + 1 - r^2)^2 = 4 (p.x^2 + p.z^2) reads s^4 + P s^2 + Q s + S = 0; Ferrari's method splits it
+// into two quadratics with the largest root of its resolvent cubic, and two Newton steps polish the root.
+bool torus_hit(vec3 v, out vec3 hit, out vec3 n, out vec3 tangent, out vec2 uv) {
+    float major = torus_radii.x, r = torus_radii.y / major;
+    vec3 o = ((object_from_world * vec4(eye, 1.0)).xyz - vec3(0.0, torus_radii.y, 0.0)) / major;
+    vec3 d = mat3(object_from_world) * v;
+    float stretch = length(d);      // object length per world length
+    d /= stretch;
+    float B = dot(o, d);
+    vec3 e = o - B * d;             // the ray's point nearest the centre: p = e + s d, s = t + B
+    float G = dot(e, e) + 1.0 - r * r;
+    float a = d.x * d.x + d.z * d.z, b = e.x * d.x + e.z * d.z, c = e.x * e.x + e.z * e.z;
+    float P = 2.0 * G - 4.0 * a, Q = -8.0 * b, S = G * G - 4.0 * c;
+    // The resolvent y^3 - P/2 y^2 - S y + (P S / 2 - Q^2 / 8) = 0, depressed (y = z + P / 6): its largest root.
+    float a2 = -0.5 * P, a1 = -S, a0 = 0.5 * P * S - 0.125 * Q * Q;
+    float p3 = (a1 - a2 * a2 / 3.0) / 3.0, q2 = 0.5 * (2.0 * a2 * a2 * a2 / 27.0 - a2 * a1 / 3.0 + a0);
+    float disc = q2 * q2 + p3 * p3 * p3;
+    float z;
+    if (disc > 0.0) {
+        // (Cardano's two cube roots, the second from the first: the sum of cube roots would cancel)
+        float u = cube_root(-q2 - (q2 >= 0.0 ? 1.0 : -1.0) * sqrt(disc));
+        z = u - p3 / u;
+    } else {
+        float m = sqrt(max(-p3, 0.0));
+        z = 2.0 * m * cos(acos(clamp(-q2 / max(m * m * m, 1e-30), -1.0, 1.0)) / 3.0);
+    }
+    float y = z - a2 / 3.0;
+    for (int i = 0; i < 2; i++) {   // (polished: the cube root and the cosine are llvmpipe's approximations)
+        float g = ((y + a2) * y + a1) * y + a0, dg = (3.0 * y + 2.0 * a2) * y + a1;
+        y -= abs(dg) > 1e-12 ? g / dg : 0.0;
+    }
+    float w = sqrt(max(2.0 * y - P, 0.0));
+    // (s^2 + y)^2 = (w s - h)^2 with 2 w h = Q and h^2 = y^2 - S: s^2 - w s + y + h = 0 and s^2 + w s + y - h = 0.
+    // h from whichever of the two is the better conditioned: w = sqrt(2 y - P) cancels where it is small.
+    float h2 = y * y - S;
+    float h = h2 > w * w || w < 1e-12 ? sign(Q) * sqrt(max(h2, 0.0)) : Q / (2.0 * w);
+    // The real roots in front of the eye, nearest first, each polished by two Newton steps, until one lies on
+    // the torus: a ray that grazes it before it hits can give a pair of roots that rounding made real.
+    float k1 = w * w - 4.0 * (y + h), k2 = w * w - 4.0 * (y - h);
+    float q1 = k1 >= 0.0 ? sqrt(k1) : 0.0, q2r = k2 >= 0.0 ? sqrt(k2) : 0.0;
+    vec4 roots = vec4(0.5 * (w - q1), 0.5 * (w + q1), 0.5 * (-w - q2r), 0.5 * (-w + q2r));
+    roots = mix(vec4(1e30), roots, vec4(bvec4(k1 >= 0.0, k1 >= 0.0, k2 >= 0.0, k2 >= 0.0)));
+    float last = B, s = 1e30;
+    vec3 p;
+    for (int pass = 0; pass < 4; pass++) {
+        vec4 ahead = mix(vec4(1e30), roots, greaterThan(roots, vec4(last)));
+        float root = min(min(ahead.x, ahead.y), min(ahead.z, ahead.w));
+        if (root > 1e29) {
+            return false;
+        }
+        last = root;
+        s = root;
+        for (int i = 0; i < 2; i++) {
+            float s2 = s * s;
+            float f = (s2 + G) * (s2 + G) - 4.0 * (c + 2.0 * b * s + a * s2);
+            float df = 4.0 * s * (s2 + G) - 8.0 * (b + a * s);
+            s -= abs(df) > 1e-12 ? f / df : 0.0;
+        }
+        p = e + s * d;
+        if (s > B && abs(length(vec2(length(p.xz) - 1.0, p.y)) - r) < 1e-3 * r) {
+            break;
+        }
+        if (pass == 3) {
+            return false;
+        }
+    }
+    hit = eye + (s - B) * major / stretch * v;
+    vec3 ring = normalize(vec3(p.x, 0.0, p.z));
+    vec3 normal = normalize(p - ring);
+    n = normalize(normal_matrix * normal);
+    tangent = normalize(normal_matrix * vec3(ring.z, 0.0, -ring.x));
+    uv = fract(vec2(atan(ring.x, ring.z), atan(normal.y, dot(normal, ring))) / (2.0 * PI));
+    return true;
+}
+#endif
+
 void main() {
 #ifdef SPHERE_IMPOSTOR
     vec3 v = normalize(v_world - eye);  // the ray through this pixel
@@ -95,23 +186,40 @@ void main() {
     vec4 clip = view_projection * vec4(hit, 1.0);
     gl_FragDepth = 0.5 + 0.5 * clip.z / clip.w;  // (the default depth range)
     vec3 n = (hit - center) / radius;
+#elif defined(TORUS_IMPOSTOR)
+    vec3 v = normalize(v_world - eye);  // the ray through this pixel
+    vec3 hit, n, tangent;
+    vec2 uv;
+    if (!torus_hit(v, hit, n, tangent, uv)) {
+        discard;                    // between the proxy's faces and the torus
+    }
+    if (length(hit - eye) < (1.0 - 1e-5) * length(v_world - eye)) {
+        discard;                    // a face of the proxy behind the hit: the one in front shades it
+    }
+    vec4 clip = view_projection * vec4(hit, 1.0);
+    gl_FragDepth = 0.5 + 0.5 * clip.z / clip.w;
+    vec2 uv2 = uv;                  // (both UV sets are (u, v): content.torus)
 #else
     vec3 n = normalize(v_normal);
 #endif
+#if !defined(SPHERE_IMPOSTOR) && !defined(TORUS_IMPOSTOR)
+    vec2 uv = v_uv, uv2 = v_uv2;
+    vec3 tangent = v_tangent;
+#endif
     vec3 n_ts = vec3(0.0, 0.0, 1.0);  // the normal in tangent space
 #ifdef NORMAL_MAP
-    vec3 n_t = textureLod(normal_map, v_uv, normal_map_lod).xyz * 2.0 - 1.0;   // eq. 5.2
+    vec3 n_t = textureLod(normal_map, uv, normal_map_lod).xyz * 2.0 - 1.0;   // eq. 5.2
     n_ts = normalize(n_t);
-    vec3 t = normalize(v_tangent);
+    vec3 t = normalize(tangent);
     vec3 b = cross(n, t);
     n = normalize(mat3(t, b, n) * n_t);
 #endif
-#ifndef SPHERE_IMPOSTOR
+#if !defined(SPHERE_IMPOSTOR) && !defined(TORUS_IMPOSTOR)
     vec3 v = normalize(v_world - eye);
 #endif
     vec3 light = vec3(1.0);
 #ifdef LIGHT_MAP
-    light = textureLod(light_map, v_uv2, light_map_lod).rgb;
+    light = textureLod(light_map, uv2, light_map_lod).rgb;
 #endif
 #ifdef INM
     // Irradiance normal mapping: the basis at the tangent-space normal, weighted by the texel's
@@ -124,14 +232,14 @@ void main() {
 #ifdef PRT_VERTEX
         irradiance += basis[k] * v_prt[k];
 #else
-        irradiance += basis[k] * textureLod(coefficient_map, vec3(v_uv2, float(k)), coefficient_map_lod).rgb;
+        irradiance += basis[k] * textureLod(coefficient_map, vec3(uv2, float(k)), coefficient_map_lod).rgb;
 #endif
     }
     vec3 diffuse = irradiance / BASES_PI;
 #elif defined(VOLUME)
     // An irradiance volume: the coefficients interpolated at the fragment's world position (grid points
     // on the box's corners, so texel centres map to them), SH bands 0-2 at the world normal.
-#ifdef SPHERE_IMPOSTOR
+#if defined(SPHERE_IMPOSTOR) || defined(TORUS_IMPOSTOR)
     vec3 p = hit;
 #else
     vec3 p = v_world;
@@ -164,7 +272,7 @@ void main() {
 #endif
 #ifdef DEBUG
 #if defined(VOLUME)
-#ifdef SPHERE_IMPOSTOR
+#if defined(SPHERE_IMPOSTOR) || defined(TORUS_IMPOSTOR)
     debug_normal = vec4(n, 0.0);
     debug_incident = vec4(hit, 0.0);     // the world point the volume was read at
 #else
@@ -175,8 +283,8 @@ void main() {
     debug_normal = vec4(n_ts, 0.0);      // the normal and the world point (tests: coefficients linear in it)
     debug_incident = vec4(v_world, 0.0);
 #elif defined(INM)
-    debug_normal = vec4(n_ts, v_uv2.x);  // what the NumPy reference evaluates the light map with
-    debug_incident = vec4(v, v_uv2.y);
+    debug_normal = vec4(n_ts, uv2.x);    // what the NumPy reference evaluates the light map with
+    debug_incident = vec4(v, uv2.y);
 #else
     debug_normal = vec4(n, light.r);
     debug_incident = vec4(v, 0.0);
