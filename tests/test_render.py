@@ -421,6 +421,7 @@ def test_a_ray_cast_torus_has_the_exact_outline_and_normals(gl, maps):
     of its exact distance, float64), up to the pixels the outline crosses, and its normals are the torus's
     at the hit (the traced hit polished on the torus's quartic)."""
     from scipy.ndimage import binary_dilation, binary_erosion
+
     from arsim.render.content import sphere_trace, torus_distance
 
     r = render_torus(gl, maps, Material(KD, KS, 80.0), impostor=True)

@@ -165,7 +165,7 @@ def _chord_gap(radius: float, steps_per_turn: int) -> float:
 
 def torus_proxy(major: float, minor: float, rings: int = 16, segments: int = 8) -> Mesh | None:
     """A coarse closed mesh (rings x segments cells) that holds the torus, for the renderer to ray-cast it
-    through (README: Rendering speed): its tube a polygon about the tube's circle, widened by the sag of the
+    through (README: AR session, Rendering speed): its tube a polygon about the tube's circle, widened by the sag of the
     ring's chords (where a face spans two of the polygons it falls that far towards the axis). None where
     that tube would reach the axis (a torus nearly a horn: the mesh would pass through itself)."""
     sag = (major + 2.0 * minor) * (1.0 - np.cos(np.pi / rings)) / np.cos(np.pi / rings)

@@ -42,7 +42,7 @@ def _bases_glsl() -> str:
 
 def _with_alpha(image: np.ndarray, dtype) -> np.ndarray:
     """An (H, W, 3) image as contiguous (H, W, 4) with alpha 1: llvmpipe samples four-channel textures
-    faster than three-channel ones (the same values; README: Rendering speed)."""
+    faster than three-channel ones (the same values; README: AR session, Rendering speed)."""
     out = np.ones((*image.shape[:2], 4), dtype)
     out[..., :3] = image
     return out
