@@ -43,7 +43,7 @@ def torus_surface(u: np.ndarray, v: np.ndarray, major: float, minor: float) -> t
     return point, normal, tangent
 
 
-def torus(major: float = 0.05, minor: float = 0.02, rings: int = 16, segments: int = 8) -> Mesh:
+def torus(major: float = 0.05, minor: float = 0.02, rings: int = 96, segments: int = 48) -> Mesh:
     """The torus mesh; both UV sets are (u, v) (the light map is baked in the same parameterisation)."""
     u, v = np.meshgrid(np.linspace(0.0, 1.0, rings + 1), np.linspace(0.0, 1.0, segments + 1), indexing="ij")
     return grid_mesh(*torus_surface(u, v, major, minor), np.stack([u, v], axis=-1))
@@ -235,7 +235,7 @@ def parse_lighting(o) -> ObjectLighting:
     return ObjectLighting("inm", f"{basis.name}{count}")
 
 
-def disc(radius: float, rings: int = 16, segments: int = 8) -> Mesh:
+def disc(radius: float, rings: int = 16, segments: int = 96) -> Mesh:
     """A flat disc on the table (y slightly above 0), normal +y, tangent +x; both UV sets planar: u along
     +x, v along -z (the bitangent n x t), the disc inscribed in the unit square."""
     r, phi = np.meshgrid(np.linspace(0.0, radius, rings + 1), np.linspace(0.0, 2 * np.pi, segments + 1), indexing="ij")
