@@ -370,3 +370,28 @@ enabled = false
     assert metrics["refined"] and metrics["loop_closures"] > 100 and metrics["direct_pairs"] > 50
     assert metrics["orientation_rms_deg_corrected"] < 0.1
     assert metrics["orientation_rms_deg_uncorrected"] > 10 * metrics["orientation_rms_deg_corrected"]
+
+
+def test_the_probe_is_its_numpy_form_texel_for_texel():
+    """probe()'s compiled correction of the noise clipped at 0 gives what its NumPy form does, on an
+    accumulator's maps with every case: unseen, never weighted, mostly clipped, no spread, far above the
+    noise and near it."""
+    rng = np.random.default_rng(3)
+    camera = CameraIntrinsics.from_fov(64, 48, 60.0)
+    acc = ProbeAccumulator(32, camera, np.ones((48, 64)), levels=2, sensor=SensorNoise(6000.0, 2.0))
+    shape = acc.radiance.shape
+    acc.radiance = np.where(rng.random(shape) < 0.1, -1.0, rng.gamma(1.0, 0.05, shape))
+    acc.weights[:] = np.where(rng.random((2, *shape)) < 0.15, 0.0, rng.gamma(2.0, 1.0, (2, *shape)))
+    acc.sums[:] = acc.weights * rng.gamma(1.0, 0.05, (2, *shape))
+    acc.variances[:] = np.where(rng.random((2, *shape)) < 0.1, 0.0, acc.weights * rng.gamma(1.0, 0.02, (2, *shape)) ** 2)
+    acc.unclipped_votes[:], acc.clipped_votes[:] = rng.random((2, 2, *shape))
+    radiance = np.maximum(acc.radiance, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mean = acc.sums[0] / acc.weights[0]
+        sigma = np.sqrt(acc.variances[0] / acc.weights[0])
+    longest = (acc.weights[0] > 0) & (acc.unclipped_votes[0] >= acc.clipped_votes[0]) & (sigma > 0)
+    bias = mean - clip_corrected(np.where(longest, mean, 0.0), np.where(longest, sigma, 1.0))
+    expected = np.where(longest & (radiance > 0), np.maximum(radiance - bias, 0.0), radiance).astype(np.float32)
+    ratio = np.where(longest, mean / np.where(longest, sigma, 1.0), np.inf)
+    assert (longest & (ratio < 8)).sum() > 100 and (longest & (ratio > 8)).sum() > 100 and (~longest).sum() > 100
+    np.testing.assert_array_equal(acc.probe(), expected)
