@@ -107,15 +107,20 @@ def _by_median_codes(frames: list[np.ndarray], products: np.ndarray, linear: np.
     order = np.argsort(x)
     x, z = x[order], z[order]
     n_bins = len(x) // MEDIAN_SAMPLES
-    xb = np.array([np.median(part) for part in np.array_split(x, n_bins)])
+    # the bins as np.array_split makes them (the first len % n_bins one sample longer), all at once
+    sizes = np.full(n_bins, len(x) // n_bins)
+    sizes[:len(x) % n_bins] += 1
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    middle = starts + sizes // 2
+    xb = np.where(sizes % 2 == 1, x[middle], (x[middle - 1] + x[middle]) / 2)  # (x sorted: each bin's median)
     # the median code with the codes spread evenly over their unit widths (a continuous median)
-    zb = np.empty(n_bins)
-    for k, part in enumerate(np.array_split(z, n_bins)):
-        counts = np.bincount(part, minlength=256).astype(np.float64)
-        cdf = np.cumsum(counts) / counts.sum()
-        c = int(np.searchsorted(cdf, 0.5))
-        below = cdf[c - 1] if c > 0 else 0.0
-        zb[k] = c - 0.5 + (0.5 - below) / max(counts[c] / counts.sum(), 1e-12)
+    counts = np.bincount(np.repeat(np.arange(n_bins), sizes) * 256 + z, minlength=n_bins * 256)
+    counts = counts.reshape(n_bins, 256).astype(np.float64)
+    total = counts.sum(axis=1, keepdims=True)
+    cdf = np.cumsum(counts, axis=1) / total
+    c = np.argmax(cdf >= 0.5, axis=1)
+    below = np.where(c > 0, cdf[np.arange(n_bins), c - 1], 0.0)
+    zb = c - 0.5 + (0.5 - below) / np.maximum(counts[np.arange(n_bins), c] / total[:, 0], 1e-12)
     zb = np.maximum.accumulate(zb)
     out = linear.copy()
     target = np.arange(1, 255)
