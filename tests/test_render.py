@@ -41,6 +41,15 @@ def look_at(eye, target):
     return Rotation.from_matrix(r), -r @ eye
 
 
+def pixel_rays(eye, target) -> np.ndarray:
+    """(H, W, 3) unit world directions of CAMERA's pixels, looking from eye at target (look_at)."""
+    rotation, _ = look_at(eye, target)
+    rows, cols = np.mgrid[0:CAMERA.height, 0:CAMERA.width]
+    rays = np.stack([(cols - CAMERA.cx) / CAMERA.fx, (rows - CAMERA.cy) / CAMERA.fy, np.ones(rows.shape)], -1)
+    rays = rotation.inv().apply(rays.reshape(-1, 3)).reshape(rays.shape)
+    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
+
 def bumps():
     """A tangent-space normal map (64 x 128): bumps in the left half of u, flat in the right half."""
     y, x = np.mgrid[0:64, 0:128]
@@ -141,11 +150,7 @@ def test_a_ray_cast_sphere_has_the_exact_outline_and_normals(gl, maps):
     r = render(gl, maps, Material(KD, KS, 80.0), debug=True, impostor=True)
     mask = r.read_mask() > 0.5
     normal, incident = (v[..., :3].astype(np.float64) for v in r.read_debug())
-    rotation, _ = look_at(EYE, [0.0, 0.1, 0.0])
-    rows, cols = np.mgrid[0:CAMERA.height, 0:CAMERA.width]
-    rays = np.stack([(cols - CAMERA.cx) / CAMERA.fx, (rows - CAMERA.cy) / CAMERA.fy, np.ones(rows.shape)], -1)
-    rays = rotation.inv().apply(rays.reshape(-1, 3)).reshape(rays.shape)
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    rays = pixel_rays(EYE, [0.0, 0.1, 0.0])
     centre, radius = np.array([0.0, 0.1, 0.0]), 0.1
     b = rays @ (EYE - centre)
     disc = b * b - (np.sum((EYE - centre) ** 2) - radius ** 2)
@@ -427,11 +432,7 @@ def test_a_ray_cast_torus_has_the_exact_outline_and_normals(gl, maps):
     r = render_torus(gl, maps, Material(KD, KS, 80.0), impostor=True)
     mask = r.read_mask() > 0.5
     normal, incident = (v[..., :3].astype(np.float64) for v in r.read_debug())
-    rotation, _ = look_at(TORUS_EYE, [0.0, 0.03, 0.0])
-    rows, cols = np.mgrid[0:CAMERA.height, 0:CAMERA.width]
-    rays = np.stack([(cols - CAMERA.cx) / CAMERA.fx, (rows - CAMERA.cy) / CAMERA.fy, np.ones(rows.shape)], -1)
-    rays = rotation.inv().apply(rays.reshape(-1, 3)).reshape(rays.shape)
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    rays = pixel_rays(TORUS_EYE, [0.0, 0.03, 0.0])
     inverse = np.linalg.inv(torus_model())
     origin = inverse[:3, :3] @ TORUS_EYE + inverse[:3, 3]
     directions = rays @ inverse[:3, :3].T  # (object lengths: 1 / 1.5 of the world's)

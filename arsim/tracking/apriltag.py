@@ -58,8 +58,10 @@ class TagPose:
 
     @property
     def camera_position(self) -> np.ndarray:
-        """The camera's centre in world coordinates."""
-        return -self.rotation.T @ self.translation
+        """The camera's centre in world coordinates: -R^T t, summed term by term (a BLAS product of this
+        size rounds by the arrays' alignment in memory: runs of the same seed differed in the last bit)."""
+        r, t = self.rotation, self.translation
+        return -(r[0] * t[0] + r[1] * t[1] + r[2] * t[2])
 
 
 LOST = TagPose(None, None, None)
