@@ -165,9 +165,10 @@ def _chord_gap(radius: float, steps_per_turn: int) -> float:
 
 def torus_proxy(major: float, minor: float, rings: int = 16, segments: int = 8) -> Mesh | None:
     """A coarse closed mesh (rings x segments cells) that holds the torus, for the renderer to ray-cast it
-    through (README: AR session, Rendering speed): its tube a polygon about the tube's circle, widened by the sag of the
-    ring's chords (where a face spans two of the polygons it falls that far towards the axis). None where
-    that tube would reach the axis (a torus nearly a horn: the mesh would pass through itself)."""
+    through (README: AR session, Rendering speed): its tube a polygon about the tube's circle, widened by
+    the sag of the ring's chords (where a face spans two of the polygons it falls that far towards the
+    axis). None where that tube would reach the axis (a torus nearly a horn: the mesh would pass through
+    itself)."""
     sag = (major + 2.0 * minor) * (1.0 - np.cos(np.pi / rings)) / np.cos(np.pi / rings)
     tube = (minor + sag) / np.cos(np.pi / segments)
     if tube >= major:

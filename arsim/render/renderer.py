@@ -844,7 +844,8 @@ class Renderer:
     def update_map(self, method: str, exponent: float, anglemap: np.ndarray) -> None:
         """Replace a map in place (the objects that read it see the new one from the next frame): how the
         baked maps take over from the ones used while they were baked. Same size as the one it replaces."""
-        self.maps[method or self.default_method, float(exponent)].write(_with_alpha(extend_beyond_rim(anglemap), np.float32).tobytes())
+        data = _with_alpha(extend_beyond_rim(anglemap), np.float32)
+        self.maps[method or self.default_method, float(exponent)].write(data.tobytes())
 
     def _read(self, texture, components: int, dtype: str, level: int = 0) -> np.ndarray:
         """A tile texture's level as an image; level 0 placed into the frame (zeros around the objects'

@@ -139,7 +139,7 @@ bool torus_hit(vec3 v, out vec3 hit, out vec3 n, out vec3 tangent, out vec2 uv) 
     float q1 = k1 >= 0.0 ? sqrt(k1) : 0.0, q2r = k2 >= 0.0 ? sqrt(k2) : 0.0;
     vec4 roots = vec4(0.5 * (w - q1), 0.5 * (w + q1), 0.5 * (-w - q2r), 0.5 * (-w + q2r));
     roots = mix(vec4(1e30), roots, vec4(bvec4(k1 >= 0.0, k1 >= 0.0, k2 >= 0.0, k2 >= 0.0)));
-    float last = B, s = 1e30;
+    float last = B, s;
     vec3 p;
     for (int pass = 0; pass < 4; pass++) {
         vec4 ahead = mix(vec4(1e30), roots, greaterThan(roots, vec4(last)));
