@@ -109,13 +109,16 @@ def _sub_unfiltered(rows: np.ndarray, out: np.ndarray) -> None:
     the same channel of the pixel before (modulo 256), into out (H, W, 3)."""
     height, width = out.shape[0], out.shape[1]
     for y in range(height):
-        for c in range(3):
-            out[y, 0, c] = rows[y, 1 + c]
-        for x in range(1, width):
+        # (running sums in registers: reading the pixel before back from out waited on the store each byte)
+        r, g, b = 0, 0, 0
+        for x in range(width):
             j = 1 + 3 * x
-            out[y, x, 0] = rows[y, j] + out[y, x - 1, 0]
-            out[y, x, 1] = rows[y, j + 1] + out[y, x - 1, 1]
-            out[y, x, 2] = rows[y, j + 2] + out[y, x - 1, 2]
+            r = (r + rows[y, j]) & 0xFF
+            g = (g + rows[y, j + 1]) & 0xFF
+            b = (b + rows[y, j + 2]) & 0xFF
+            out[y, x, 0] = r
+            out[y, x, 1] = g
+            out[y, x, 2] = b
 
 
 def _written_here(header: tuple, pixels: bytes) -> np.ndarray | None:
