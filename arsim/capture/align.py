@@ -8,6 +8,7 @@ cost)."""
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -150,6 +151,11 @@ class Aligner:
         self.clahe = cv2.createCLAHE(clipLimit=6.0, tileGridSize=(4, 4))
         self.rng = np.random.default_rng(seed)
         self.edge = cv2.getStructuringElement(cv2.MORPH_RECT, (9, 9))  # a descriptor's reach at this scale
+        # The frame's features are found on a thread of their own (a detector and an equaliser of its own:
+        # the same features) while the view is rendered and its features found: OpenCV and the renderer
+        # release the GIL, and the capture's main thread waits on the alignment.
+        self.frame_side = (sift_detector(), cv2.createCLAHE(clipLimit=6.0, tileGridSize=(4, 4)))
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="align")
 
     def predicted_view(self, probe: ProbeAccumulator, camera_to_world: np.ndarray,
                        exposure_scale: float) -> tuple[np.ndarray, np.ndarray]:
@@ -161,20 +167,26 @@ class Aligner:
                 self.falloff, self.mids, view, mask)
         return view, mask
 
+    def _frame_features(self, frame: np.ndarray) -> tuple:
+        """The frame's SIFT keypoints and descriptors, at the alignment's size, locally equalised."""
+        detector, clahe = self.frame_side
+        small = cv2.resize(frame, (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA)
+        return detector.detectAndCompute(clahe.apply(cv2.cvtColor(small, cv2.COLOR_RGB2GRAY)), None)
+
     def align(self, frame: np.ndarray, probe: ProbeAccumulator, camera_to_world: np.ndarray,
               exposure_scale: float) -> Alignment:
         """The rotation from the predicted view (camera_to_world) of the probe captured so far to the
         frame, if a reliable one is found. exposure_scale: relative exposure per unit radiance of this
         frame (before vignetting)."""
+        frame_features = self.pool.submit(self._frame_features, frame)
         view, mask = self.predicted_view(probe, camera_to_world, exposure_scale)
         if np.mean(mask > 0) < MIN_COVERED:
+            frame_features.cancel()
             return Alignment(None, 0, 0)
-        small = cv2.resize(frame, (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA)
         grey_view = self.clahe.apply(cv2.cvtColor(view, cv2.COLOR_RGB2GRAY))
-        grey_frame = self.clahe.apply(cv2.cvtColor(small, cv2.COLOR_RGB2GRAY))
         # Corners on the edge of what is covered are the probe's, not the scene's: keep clear of it.
         keypoints_v, desc_v = self.features.detectAndCompute(grey_view, cv2.erode(mask, self.edge))
-        keypoints_f, desc_f = self.features.detectAndCompute(grey_frame, None)
+        keypoints_f, desc_f = frame_features.result()
         if desc_v is None or desc_f is None or len(keypoints_v) < MIN_INLIERS or len(keypoints_f) < MIN_INLIERS:
             return Alignment(None, 0, 0)
         matches = self.matcher.match(desc_v, desc_f)
