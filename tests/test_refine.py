@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from arsim.capture.refine import CHAIN_FLOOR_DEG, GyroNoise, KeyframeFeatures, interpolate, isotropic, match_pair, solve
+from arsim.capture.refine import (CHAIN_FLOOR_DEG, GyroNoise, Keyframe, KeyframeFeatures, guided_matches, interpolate, isotropic,
+                                  match_pair, solve)
 from arsim.core.assets import assets_dir
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.hdr_io import read_hdr
@@ -98,3 +99,27 @@ def test_loop_closure_pairs_are_found_to_their_known_rotation(env):
         assert found is not None and found[2] >= 12
         errors.append(np.degrees((found[0].inv() * (ra.inv() * rb)).magnitude()))
     assert max(errors) < 0.05, errors
+
+
+@pytest.mark.parametrize("radius_deg", [2.0, 20.0, 180.0])
+def test_guided_matches_equal_those_of_the_full_distance_matrix(radius_deg):
+    """The gated pairs' distances alone give the mutual nearest descriptors the full matrix gives, ties (the
+    descriptors are small whole numbers, as SIFT's, so many distances are equal) broken the same way."""
+    rng = np.random.default_rng(3)
+    for trial in range(5):
+        na, nb = rng.integers(5, 300, 2)
+        bearings = [Rotation.random(n, random_state=rng).apply([0.0, 0.0, 1.0]) for n in (na, nb)]
+        bearings = [np.where(b[:, 2:] < 0, -b, b) for b in bearings]  # (a camera's half-space)
+        descriptors = [rng.integers(0, 3, (n, 128)).astype(np.float32) for n in (na, nb)]
+        a, b = Keyframe(0, bearings[0], descriptors[0]), Keyframe(1, bearings[1], descriptors[1])
+        expected, radius = Rotation.from_rotvec([0.0, 0.1, 0.02]), np.radians(radius_deg)
+        da, db = descriptors[0].astype(np.float64), descriptors[1].astype(np.float64)
+        d2 = np.sum(da**2, axis=1)[:, None] + np.sum(db**2, axis=1)[None, :] - 2 * da @ db.T
+        d2[(a.bearings @ expected.apply(b.bearings).T) <= np.cos(radius)] = np.inf
+        nearest_b, nearest_a = np.argmin(d2, axis=1), np.argmin(d2, axis=0)
+        k = np.arange(na)
+        ia = k[np.isfinite(d2[k, nearest_b]) & (nearest_a[nearest_b] == k)]
+        got = guided_matches(a, b, expected, radius)
+        assert len(ia) > 0
+        np.testing.assert_array_equal(got[0], ia)
+        np.testing.assert_array_equal(got[1], nearest_b[ia])

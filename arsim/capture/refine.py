@@ -207,6 +207,32 @@ def keyframe_features(camera: CameraIntrinsics, direct: DirectImages | None, key
     return [shares[i % workers][i // workers] for i in range(len(keys))]
 
 
+def _nearest(rows: np.ndarray, cols: np.ndarray, d2: np.ndarray, count: int) -> np.ndarray:
+    """Per row index (0..count-1) the column of its least d2 among the pairs (rows, cols) given, the lowest
+    column among equals (as argmin over a row); -1 for a row without a pair."""
+    order = np.lexsort((cols, d2, rows))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = rows[order][1:] != rows[order][:-1]
+    nearest = np.full(count, -1)
+    nearest[rows[order][first]] = cols[order][first]
+    return nearest
+
+
+def guided_matches(a: Keyframe, b: Keyframe, expected: Rotation, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mutual nearest descriptors (indices into a's and b's features) among the pairs whose bearings the expected
+    rotation puts within radius of each other. Only those pairs' distances are computed: a gate of a few degrees
+    allows a few in a thousand. SIFT's descriptors hold whole numbers, so |d_a|^2 + |d_b|^2 - 2 d_a.d_b is exact
+    in float64 whatever the order of its sums: the same matches as over the full distance matrix."""
+    rows, cols = np.nonzero((a.bearings @ expected.apply(b.bearings).T) > np.cos(radius))
+    da, db = a.descriptors.astype(np.float64), b.descriptors.astype(np.float64)
+    d2 = (np.sum(da**2, axis=1)[rows] + np.sum(db**2, axis=1)[cols]
+          - 2 * np.einsum("kj,kj->k", da[rows], db[cols]))
+    nearest_b, nearest_a = _nearest(rows, cols, d2, len(da)), _nearest(cols, rows, d2, len(db))
+    ia = np.flatnonzero(nearest_b >= 0)
+    ia = ia[nearest_a[nearest_b[ia]] == ia]
+    return ia, nearest_b[ia]
+
+
 def match_pair(a: Keyframe, b: Keyframe, rng: np.random.Generator, expected: Rotation | None = None,
                radius: float = np.pi) -> tuple[Rotation, np.ndarray, int] | None:
     """The relative rotation Q with bearings_a ≈ Q bearings_b (so Q = R_a⁻¹ R_b for camera-to-world R),
@@ -222,14 +248,8 @@ def match_pair(a: Keyframe, b: Keyframe, rng: np.random.Generator, expected: Rot
     if expected is None:
         matches = cv2.BFMatcher(cv2.NORM_L2, crossCheck=True).match(a.descriptors, b.descriptors)
         ia, ib = [m.queryIdx for m in matches], [m.trainIdx for m in matches]
-    else:  # mutual nearest descriptors among the pairs the expected rotation allows
-        da, db = a.descriptors.astype(np.float64), b.descriptors.astype(np.float64)
-        d2 = np.sum(da**2, axis=1)[:, None] + np.sum(db**2, axis=1)[None, :] - 2 * da @ db.T
-        d2[(a.bearings @ expected.apply(b.bearings).T) <= np.cos(radius)] = np.inf
-        nearest_b, nearest_a = np.argmin(d2, axis=1), np.argmin(d2, axis=0)
-        k = np.arange(len(da))
-        ia = k[np.isfinite(d2[k, nearest_b]) & (nearest_a[nearest_b] == k)]
-        ib = nearest_b[ia]
+    else:
+        ia, ib = guided_matches(a, b, expected, radius)
     if len(ia) < MIN_PAIR_INLIERS:
         return None
     ba, bb = a.bearings[ia], b.bearings[ib]
