@@ -144,7 +144,7 @@ class CameraRenderer(EnvironmentRenderer):
         self.frame_program["read_noise_var"].value = sensor.read_noise_e**2
         self.frame_program["width"].value = camera.width
         self.frame_program["height"].value = camera.height
-        self.codes = self.ctx.texture((camera.width, camera.height), 4, dtype="u1")  # integer RGBA8UI
+        self.codes = self.ctx.buffer(reserve=camera.width * camera.height * 4)  # RGBA bytes per pixel
 
     def capture(self, camera_to_world: Rotation, exposure_s: float, iso: float, key: int,
                 position: np.ndarray | None = None) -> np.ndarray:
@@ -156,7 +156,7 @@ class CameraRenderer(EnvironmentRenderer):
         p["electrons_per_radiance"].value = float(np.float32(exposure_s * s.sensitivity * s.full_well_e))
         p["gain"].value = float(np.float32(iso / s.base_iso / s.full_well_e))
         p["noise_key"].value = int(key)
-        self.codes.bind_to_image(0, read=False, write=True)
+        self.codes.bind_to_storage_buffer(0)
         p.run(-(-self.camera.width // self.GROUP), self.camera.height)
         # Every invocation's store done before the read-back: a barrier, then a finish, as a frame whose
         # write raced the read would differ from the same seed's in a few pixels.
