@@ -57,3 +57,40 @@ def test_read_frame_unfilters_arsims_frames_as_opencv_decodes_them(tmp_path, sha
         assert (_written_here(header, pixels) is not None) == fast
         expected = np.repeat(image[..., None], 3, axis=-1) if image.ndim == 2 else image
         assert np.array_equal(read_frame(path), expected)
+
+
+def test_kept_frames_are_the_files_pixels_until_a_file_changes(tmp_path):
+    """While a run keeps the frames it writes, read_frame gives them from memory: the same pixels as the file,
+    read-only (every reader shares them), and only while the file is the one written: a file replaced, changed or
+    removed is read from disk. Past the limit, and outside kept_frames, nothing is kept."""
+    import os
+
+    from arsim.core.png import _KEPT, kept_frames, read_frame, write_frame_png
+
+    rng = np.random.default_rng(3)
+    rgba = rng.integers(0, 256, (3, 24, 32, 4), dtype=np.uint8)
+    frames = [rgba[k, :, :, :3] for k in range(3)]  # (strided, as GL read-backs are)
+    paths = [tmp_path / f"{k}.png" for k in range(3)]
+    with kept_frames(2 * frames[0][..., 0].size * 3):  # room for two frames
+        for path, frame in zip(paths, frames):
+            write_frame_png(path, frame)
+        kept = [_KEPT.get(path) for path in paths]
+        assert kept[0] is not None and kept[1] is not None and kept[2] is None  # the third past the limit
+        for path, frame in zip(paths, frames):
+            image = read_frame(path)
+            assert image.flags.c_contiguous and np.array_equal(image, frame)
+            assert np.array_equal(image, cv2.imdecode(np.frombuffer(path.read_bytes(), np.uint8), cv2.IMREAD_COLOR)[..., ::-1])
+        assert read_frame(paths[0]) is kept[0] and not kept[0].flags.writeable
+        with pytest.raises(ValueError):
+            kept[0][0, 0, 0] = 1
+        written = frames[1].copy()
+        frames[1][...] = 0  # the writer's array is its own: what is kept does not follow it
+        assert np.array_equal(read_frame(paths[1]), written)
+        other = np.full((24, 32, 3), 9, np.uint8)  # (smaller as PNG: the file's size changes whatever the clock)
+        paths[0].write_bytes(png_bytes(other))  # changed in place (another writer)
+        assert np.array_equal(read_frame(paths[0]), other)
+        os.replace(paths[2], paths[1])  # replaced by another file
+        assert np.array_equal(read_frame(paths[1]), frames[2])
+    assert _KEPT.frames == {} and _KEPT.held == 0
+    write_frame_png(paths[0], frames[0])
+    assert _KEPT.get(paths[0]) is None  # not kept outside kept_frames

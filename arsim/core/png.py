@@ -15,6 +15,7 @@ two pixel for pixel the same in the tests).
 from __future__ import annotations
 
 import collections
+import contextlib
 import hashlib
 import os
 import struct
@@ -331,10 +332,82 @@ def png_of_frame(path: Path) -> bytes:
     return Path(path).read_bytes() if found is None else png_bytes(_read_video_frame(*found))
 
 
+class _KeptFrames:
+    """Frames this process wrote as PNG (write_frame_png), held decoded while kept_frames is active: the stages
+    after a recording read them from memory instead of inflating them again. A frame is given back only while
+    its file is the one written (the same inode, size and modification time): a file replaced, changed or
+    removed since is read from disk like any other. The arrays are read-only: every reader shares one."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.limit = 0  # bytes; 0: not keeping
+        self.held = 0
+        self.frames: dict[str, tuple[tuple, np.ndarray]] = {}
+
+    @staticmethod
+    def _stamp(path: Path) -> tuple | None:
+        try:
+            st = os.stat(path)
+        except OSError:
+            return None
+        return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+
+    def put(self, path: Path, frame: np.ndarray) -> None:
+        if not self.limit or self.held + frame.nbytes > self.limit:
+            return
+        stamp = self._stamp(path)
+        if stamp is None:
+            return
+        image = np.ascontiguousarray(frame)
+        image = image.copy() if image is frame else image  # (the caller's array stays the caller's)
+        image.setflags(write=False)
+        with self.lock:
+            if self.limit and self.held + image.nbytes <= self.limit:
+                old = self.frames.pop(os.path.abspath(path), None)
+                self.held += image.nbytes - (old[1].nbytes if old is not None else 0)
+                self.frames[os.path.abspath(path)] = (stamp, image)
+
+    def get(self, path: Path) -> np.ndarray | None:
+        if not self.frames:
+            return None
+        with self.lock:
+            found = self.frames.get(os.path.abspath(path))
+        return found[1] if found is not None and found[0] == self._stamp(path) else None
+
+
+_KEPT = _KeptFrames()
+
+
+@contextlib.contextmanager
+def kept_frames(limit_bytes: int) -> Iterator[None]:
+    """While active, the frames write_frame_png writes (up to limit_bytes of them, decoded) are what read_frame
+    gives for their files; released at the end. (A run keeps its recording's frames for its capture, estimates
+    and session: each would otherwise inflate every one of them again.)"""
+    with _KEPT.lock:
+        outer = _KEPT.limit
+        _KEPT.limit = outer or int(limit_bytes)
+    try:
+        yield
+    finally:
+        if not outer:
+            with _KEPT.lock:
+                _KEPT.limit, _KEPT.held, _KEPT.frames = 0, 0, {}
+
+
+def write_frame_png(path: Path, frame: np.ndarray) -> None:
+    """A camera frame (H, W, 3) uint8 written atomically as png_bytes has it (and kept: kept_frames)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(png_bytes(frame))
+    _KEPT.put(path, frame)
+
+
 def read_frame(path: Path, check: bool = True) -> np.ndarray:
     """(H, W, 3) uint8 RGB of an 8-bit image file (a recording's frame, a run's rendered frame), or of a frame in
     a video (video_frame_name). check=False leaves out png_problem, for a file this process has read and checked
     before."""
+    kept = _KEPT.get(path)
+    if kept is not None:
+        return kept
     found = video_frame(path)
     if found is not None:
         return _read_video_frame(*found)

@@ -13,6 +13,7 @@ import contextlib
 import dataclasses
 import hashlib
 import json
+import os
 import platform
 import time
 from collections.abc import Callable
@@ -25,6 +26,7 @@ from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.errors import ArsimError
 from arsim.core.files import json_text, write_text_atomic
 from arsim.core.gl import create_gl_context
+from arsim.core.png import kept_frames
 from arsim.core.progress import quiet_stage
 from arsim.core.resample import to_layout
 from arsim.capture.response import RecoveredResponse
@@ -34,6 +36,7 @@ from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
 STAGES = ("recording", "capture", "estimates", "maps", "session", "report")
+KEPT_FRAME_BYTES = 3 * 1024**3  # a recording the run makes, kept decoded for its later stages (kept_frame_bytes)
 
 
 def _files_under(out: Path, roles: dict[str, str]) -> list[dict]:
@@ -436,13 +439,32 @@ def _write_manifest(out: Path, manifest: dict) -> None:
     write_text_atomic(out / "manifest.json", text)
 
 
+def kept_frame_bytes() -> int:
+    """How much of a recording made by a run is kept decoded for its later stages (core.png.kept_frames): the
+    default scenario's 2,400 frames take 2.2 GB; at most a quarter of this machine's memory."""
+    try:
+        memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        memory = 8 * 1024**3
+    return min(KEPT_FRAME_BYTES, memory // 4)
+
+
 def run_scenario(scenario: Scenario, source: str, out: Path, recording: Path | None = None,
                  stage: Callable = quiet_stage, cache: StageCache | None = None, baseline: dict | None = None,
                  keep_recording: bool = False) -> dict:
     """Run every stage into out, each reused from the cache where its key matches (README: The run cache);
     returns the manifest (also written to out/manifest.json). baseline: a baseline run's metrics.json, whose
     figures the report shows beside the run's. The recording made (or reused) is read where it lies while the run
-    works; its frame images are left out of out at the end unless keep_recording (README: Run outputs and disk)."""
+    works; its frame images are left out of out at the end unless keep_recording (README: Run outputs and disk).
+    A recording made by the run is also kept decoded in memory while the run lasts (kept_frame_bytes): the
+    capture, the estimates and the session read its frames from there instead of inflating each again."""
+    with kept_frames(kept_frame_bytes()):
+        return _run_stages(scenario, source, out, recording, stage, cache, baseline, keep_recording)
+
+
+def _run_stages(scenario: Scenario, source: str, out: Path, recording: Path | None, stage: Callable,
+                cache: StageCache | None, baseline: dict | None, keep_recording: bool) -> dict:
+    """run_scenario's work."""
     from arsim.capture.pipeline import CaptureSettings, recording_scenario
     from arsim.evaluate.compare_methods import maps_figures
     from arsim.evaluate.estimates import estimate_summary, write_estimate_frames

@@ -39,8 +39,8 @@ from scipy.spatial.transform import Rotation
 from arsim import __version__
 from arsim.core.conventions import CameraIntrinsics
 from arsim.core.errors import ArsimError
-from arsim.core.files import atomic_path, clear_files, is_temporary, write_text_atomic
-from arsim.core.png import VIDEO_SUFFIX, FrameVideo, frame_file, png_bytes, video_frame, video_frame_name, video_size
+from arsim.core.files import clear_files, is_temporary, write_text_atomic
+from arsim.core.png import VIDEO_SUFFIX, FrameVideo, frame_file, video_frame, video_frame_name, video_size, write_frame_png
 from arsim.scenario import Scenario, scenario_to_toml
 from arsim.scenario.environment import load_environment
 from arsim.sensors.camera import AutoExposure, ResponseCurve, SensorSettings, noise_key
@@ -78,11 +78,6 @@ def _csv(header: list[str], rows) -> str:
 
 def _csv_formatted(header: list[str], row_format: str, rows) -> str:
     return ",".join(header) + "\n" + "".join(row_format % row + "\n" for row in rows)
-
-
-def _write_png(path: Path, frame: np.ndarray) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(png_bytes(frame))
 
 
 BURST_METERING_FRAMES = 8  # unrecorded frames the burst's auto-exposure takes to settle on its view
@@ -133,7 +128,7 @@ def _write_burst(out_dir: Path, camera: CameraRenderer, views: Rotation, scenari
     for k, (exposure, iso) in enumerate(settings):
         frame = camera.capture(view, exposure, iso, noise_key(scenario.run.seed, "burst", k))
         name = f"burst/{k:02d}.png"
-        _write_png(out_dir / name, frame)
+        write_frame_png(out_dir / name, frame)
         rows.append((int(round(exposure * 1e9)), round(iso, 3), name))
     return rows
 
@@ -283,7 +278,7 @@ def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mou
                 file = video_frame_name(video_name, k)
             else:
                 name = f"{k:06d}.png"
-                pending.append(writers.submit(_write_png, out_dir / "frames" / name, frame))
+                pending.append(writers.submit(write_frame_png, out_dir / "frames" / name, frame))
                 file = f"frames/{name}"
             while len(pending) > MAX_PENDING_FRAMES:  # bounded: frames waiting to be written hold memory
                 pending.popleft().result()
