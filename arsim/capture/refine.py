@@ -83,13 +83,19 @@ class GyroNoise:
 
 def _prefix_products(steps: Rotation) -> Rotation:
     """C_k = s_0 s_1 ... s_k for every k: a Hillis-Steele scan (log2 K vectorised products; rotations
-    compose associatively, the earlier prefix on the left)."""
-    q = steps
+    compose associatively, the earlier prefix on the left), on the quaternions themselves: Rotation's
+    products and slices cost 0.2 s a scan of a minute's gyroscope, these a few milliseconds."""
+    q = steps.as_quat()  # (x, y, z, w)
     shift = 1
     while shift < len(q):
-        q = Rotation.concatenate([q[:shift], q[:-shift] * q[shift:]])
+        a, b = q[:-shift], q[shift:]
+        product = np.empty_like(b)
+        product[:, :3] = a[:, 3:] * b[:, :3] + b[:, 3:] * a[:, :3] + np.cross(a[:, :3], b[:, :3])
+        product[:, 3] = a[:, 3] * b[:, 3] - np.einsum("ij,ij->i", a[:, :3], b[:, :3])
+        product /= np.linalg.norm(product, axis=1, keepdims=True)  # (as Rotation's products keep them unit)
+        q = np.concatenate([q[:shift], product])
         shift *= 2
-    return q
+    return Rotation.from_quat(q)
 
 
 def chain_turns(steps: Rotation) -> Rotation:
