@@ -740,7 +740,9 @@ def cmd_run(args: argparse.Namespace) -> int:
           + f"; report {out / 'report' / 'index.html'}")
     for name, st in manifest["stages"].items():
         where = f"from {st['from']}" if st["from"] else (f"stored in {st['stored']}" if st.get("stored") else "not cached")
-        print(f"  {name:<10} {st['status']:<8} {st['seconds']:7.2f} s  key {st['key']}  {where}")
+        cpu = st.get("cpu_seconds", 0.0)
+        print(f"  {name:<10} {st['status']:<8} {st['seconds']:7.2f} s  CPU {cpu:7.2f} s ({cpu / max(st['seconds'], 0.01):4.0%})"
+              f"  key {st['key']}  {where}")
     for why in manifest["metrics"].get("truth", {}).values():
         print(f"note: the truth is {why}")
     print(f"run: {disk_summary(manifest, out)}")

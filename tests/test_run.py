@@ -87,6 +87,10 @@ def test_run_writes_the_run_directory_manifest_and_report(runs):
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["seed"] == 7 and manifest["scenario"]["name"] == "small"
     assert set(manifest["seconds_per_stage"]) == {"recording", "capture", "estimates", "maps", "session", "report"}
+    # the CPU time beside the wall time, per stage (each stage here does seconds of work: none takes no CPU)
+    cpu = manifest["cpu_seconds_per_stage"]
+    assert set(cpu) == set(manifest["seconds_per_stage"]) and all(v > 0 for v in cpu.values())
+    assert all(manifest["stages"][name]["cpu_seconds"] == v for name, v in cpu.items())
     # The truth frame and its FLIP on every 4th frame (the default flip_every) and on the saved frames.
     session = json.loads((out / "metrics.json").read_text())["session"]
     saved = {int(p.stem) for p in (out / "frames").glob("*.png")}

@@ -484,14 +484,16 @@ def _run_stages(scenario: Scenario, source: str, out: Path, recording: Path | No
 
     cache = cache if cache is not None else StageCache(None)
     seconds: dict[str, float] = {}
+    cpu_seconds: dict[str, float] = {}  # the process's CPU time, all threads: above the wall time where work overlaps
 
     @contextlib.contextmanager
     def step(key: str, description: str):
         """A stage shown by `stage` and timed into the manifest."""
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         with stage(description) as update:
             yield update
         seconds[key] = round(seconds.get(key, 0.0) + time.perf_counter() - start, 2)
+        cpu_seconds[key] = round(cpu_seconds.get(key, 0.0) + time.process_time() - cpu, 2)
 
     stages = _Stages(cache, out, step, seconds)
     r = scenario.render
@@ -652,12 +654,14 @@ def _run_stages(scenario: Scenario, source: str, out: Path, recording: Path | No
         frames = _recording_frames(recording, hashes, made["key"], content, keep_recording, made["from"] or made.get("stored"))
     for name, s in stages.record.items():
         s["seconds"] = seconds.get(name, 0.0)
+        s["cpu_seconds"] = cpu_seconds.get(name, 0.0)
     manifest = {
         "scenario": {"source": source, "name": scenario.run.name, "resolved": "scenario.toml"},
         "seed": scenario.run.seed,
         "recording": str(recording) if recording != out / "recording" else "recording",
         "versions": versions(baked["gl_renderer"]),
         "seconds_per_stage": seconds,
+        "cpu_seconds_per_stage": cpu_seconds,
         "stages": stages.record,
         "cache": str(cache.root) if cache.root is not None else None,
         "metrics": metrics,
