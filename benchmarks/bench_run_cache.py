@@ -29,7 +29,9 @@ def run(*args) -> float:
 
 def stages(out: Path) -> str:
     m = json.loads((out / "manifest.json").read_text())
-    return ", ".join(f"{name} {s['status']} {s['seconds']:.1f} s" for name, s in m["stages"].items())
+    # (the CPU time: the process's, all threads, without the FLIP worker's; cpu_seconds in the manifest)
+    return ", ".join(f"{name} {s['status']} {s['seconds']:.1f} s (CPU {s.get('cpu_seconds', 0.0):.1f} s)"
+                     for name, s in m["stages"].items())
 
 
 def main() -> None:
