@@ -247,6 +247,21 @@ def test_capture_of_a_short_recording_writes_every_output(short_recording, tmp_p
     assert 0 < metrics["coverage_pct"] <= 100
 
 
+def test_the_capture_reports_progress_through_its_refinement(short_recording):
+    """The refinement (keyframe features, pairs, direct alignments: half of the default capture's time) reports
+    as it goes instead of holding the progress still: the fraction never falls, passes through the
+    refinement's share several times and ends at 1."""
+    from arsim.capture.pipeline import ONLINE_SHARE, REFINE_SHARE, CaptureSettings, capture
+    from arsim.sensors.recording import load_recording
+
+    fractions = []
+    result = capture(load_recording(short_recording), CaptureSettings(size=64), lambda f, coverage: fractions.append(f))
+    assert result.refinement is not None
+    assert all(b >= a for a, b in zip(fractions, fractions[1:])), fractions
+    assert len([f for f in fractions if ONLINE_SHARE < f < ONLINE_SHARE + REFINE_SHARE]) >= 3, fractions
+    assert fractions[-1] == 1.0
+
+
 def _no_frames(rec):
     for png in (rec / "frames").glob("*.png"):
         png.unlink()

@@ -128,6 +128,9 @@ def exposure_scales(rec: Recording, sensor: SensorSettings) -> list[float]:
     return [f["exposure_ns"] / 1e9 * f["iso"] / sensor.base_iso * sensor.sensitivity for f in rec.frames]
 
 
+# With the refinement, the share of the capture's progress its online pass and its refinement take (the rest: the
+# frames accumulated again), as their times on the default sweep split
+ONLINE_SHARE, REFINE_SHARE = 0.4, 0.45
 SNAPSHOT_SIZE = 32  # the growing probe's snapshots (SH to band 9 need no more)
 # The online pass keeps the frames it decoded, up to this many bytes, for the refined pass to accumulate
 # again instead of decoding them a second time (the default sweep: 1814 frames, 1.7 GB; decoding them again
@@ -246,7 +249,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
         if final_online and _second_ends(times, k):  # (the online probe is the final one: its growth kept)
             online_snapshots.append((float(times[k] - times[0]), probe_snapshot(accumulator)))
         if k % 30 == 0 or k == len(rec.frames) - 1:
-            progress((k + 1) / len(rec.frames) * (0.6 if settings.refine else 1.0), accumulator.coverage())
+            progress((k + 1) / len(rec.frames) * (ONLINE_SHARE if settings.refine else 1.0), accumulator.coverage())
     if not any_unclipped:
         raise ArsimError(f"{rec.folder}: every frame is saturated (all codes 255); nothing can be captured from it")
     online = Rotation.concatenate(corrected)
@@ -262,13 +265,16 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     refinement = refine(times, np.array(sorted(metered_small)), uncorrected, metered_small.__getitem__,
                         scenario.device.camera.hfov_deg, camera, gyro_noise,
                         scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(mount)),
-                        DirectImages(features.camera, camera, response.linear, falloff))
+                        DirectImages(features.camera, camera, response.linear, falloff),
+                        lambda fraction: progress(ONLINE_SHARE + REFINE_SHARE * fraction, accumulator.coverage()))
     # with no keyframe pair the refinement has only the IMU's orientations: the online pass's, with the bias its
     # filter learnt from whatever it aligned, are no worse
     final = refinement.orientations if refinement.loop_closures else online
     snapshots = []
     accumulator = accumulate_frames(rec, final, response, settings.size,
-                                    lambda fraction, coverage: progress(0.6 + 0.4 * fraction, coverage), snapshots,
+                                    lambda fraction, coverage: progress(ONLINE_SHARE + REFINE_SHARE
+                                                                        + (1 - ONLINE_SHARE - REFINE_SHARE) * fraction,
+                                                                        coverage), snapshots,
                                     checked=True, decoded=decoded)  # (the online pass read and checked every frame)
     return CaptureResult(accumulator, response, times, truth, uncorrected, final, online, aligned,
                          time.perf_counter() - start, seconds_online, gyro_bias, refinement, snapshots)

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import cv2
@@ -42,6 +43,10 @@ PAIR_FLOOR_DEG = 0.05  # added on every axis: a pair's rotation is known no bett
 # Direct alignments run on this many threads: OpenCV's blurs and remaps let go of the GIL, and each pair's
 # alignment is deterministic and independent of the others (no random draws), so the order does not matter.
 DIRECT_WORKERS = min(2, os.cpu_count() or 1)
+PROGRESS_S = 0.5  # how often the keyframes' features report their progress
+# The refinement's progress, by phase: the share of its time each took on the default sweep (keyframe features,
+# the calibration's pairs, then each round's pairs and solve)
+PHASE_SHARES = (0.3, 0.2, 0.35, 0.15)  # (2 + ROUNDS of them)
 PAIR_GATE_DEG = 1.0  # a pair disagreeing with the estimate's relative rotation by more (and the gyroscope's
 # possible drift between the two) is a false match; its features are matched within the same (0.3 for the pairs
 # taken close in time: the dim studio 0.30, but the night 0.09 -> 0.14, the second seed's night 0.18 -> 0.41)
@@ -200,19 +205,28 @@ class KeyframeFeatures:
                         None if self.direct is None else self.direct(small))
 
 
-def keyframe_features(camera: CameraIntrinsics, direct: DirectImages | None, keys, frames) -> list[Keyframe]:
+def keyframe_features(camera: CameraIntrinsics, direct: DirectImages | None, keys, frames,
+                      progress: Callable[[float], None] = lambda fraction: None) -> list[Keyframe]:
     """KeyframeFeatures of each keyframe (frames(k): its codes), on threads that each keep their own
     detector (OpenCV's SIFT and CLAHE run without the GIL): the default sweep's 299 keyframes took 23 ms
-    each one after another, 8 ms on two threads, the same features."""
+    each one after another, 8 ms on two threads, the same features. progress(fraction done) is called
+    from this thread (the workers only append to their lists)."""
     workers = max(1, min(4, os.cpu_count() or 1, len(keys)))
+    shares: list[list[Keyframe]] = [[] for _ in range(workers)]
 
-    def share(start: int) -> list[Keyframe]:
+    def share(start: int) -> None:
         features = KeyframeFeatures(camera)
         features.direct = direct
-        return [features(int(k), frames(int(k))) for k in keys[start::workers]]
+        for k in keys[start::workers]:
+            shares[start].append(features(int(k), frames(int(k))))
 
     with ThreadPoolExecutor(workers) as pool:
-        shares = list(pool.map(share, range(workers)))
+        pending = {pool.submit(share, start) for start in range(workers)}
+        while pending:
+            finished, pending = wait(pending, timeout=PROGRESS_S)
+            for future in finished:
+                future.result()  # (a worker's exception, raised here)
+            progress(sum(len(s) for s in shares) / max(len(keys), 1))
     return [shares[i % workers][i // workers] for i in range(len(keys))]
 
 
@@ -466,34 +480,45 @@ def calibrate_gyroscope(intervals: GyroIntervals, constraints: list[Constraint],
 
 def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_deg: float,
            camera: CameraIntrinsics, gyro: GyroNoise, seed: int = 0, gyro_stream: tuple | None = None,
-           direct: DirectImages | None = None) -> Refinement:
+           direct: DirectImages | None = None,
+           progress: Callable[[float], None] = lambda fraction: None) -> Refinement:
     """Refined orientations of every frame. times (K,): seconds; metered: indices of the frames taken at the
     metered exposure (the ones matched); imu: the IMU's camera-to-world orientations (K,); frames(k): frame
     k's 8-bit codes; gyro_stream: (t_ns, omega, camera-to-device mount) of the raw gyroscope, whose relative
     rotations between keyframes are then the chain, calibrated (else the fused orientation's, uncalibrated);
-    direct: how keyframes are aligned directly where no feature pair reaches them (none: they are not).
+    direct: how keyframes are aligned directly where no feature pair reaches them (none: they are not);
+    progress(fraction done), now and then.
 
     In three steps: the gyroscope calibrated against the pairs taken close in time (matched and gated
     against the raw gyroscope, which drifts little over a few seconds), so that its chain alone starts
     within a fraction of a degree everywhere (a drifted start would gate the true loop closures out);
     the loop closures found and gated against that start; then the joint solve, twice."""
     began = time.perf_counter()
+
+    def phase(k: int) -> Callable[[float], None]:
+        """progress within phase k of PHASE_SHARES"""
+        low = sum(PHASE_SHARES[:k])
+        return lambda fraction: progress(min(low + PHASE_SHARES[k] * fraction, 1.0))
+
     keys = select_keyframes(metered, imu, times)
     key_t = times[keys]
     # (frames(k) may give the frame at KeyframeFeatures.small's size already)
-    keyframes = keyframe_features(camera, direct, keys, frames)
+    keyframes = keyframe_features(camera, direct, keys, frames, phase(0))
     rng = np.random.default_rng(seed)
     matched: dict[tuple[int, int], tuple[Rotation, np.ndarray, int] | None] = {}
     aligned: dict[tuple[int, int], tuple[Rotation, np.ndarray] | None] = {}
     direct_used: set[tuple[int, int]] = set()  # the pairs the last call took from the direct alignment
 
-    def pairs_within(pairs, expected: Rotation, gate) -> list[Constraint]:
+    def pairs_within(pairs, expected: Rotation, gate, report: Callable[[float], None]) -> list[Constraint]:
         """The pairs matched within gate(dt, angle) (rad) of the expected orientations' (per keyframe) relative
         rotation, and agreeing with it within the same; then, for the keyframes no feature pair reaches, their
-        pairs aligned directly (a bare ceiling: the 20 s drifting sweep's last 8 s)."""
+        pairs aligned directly (a bare ceiling: the 20 s drifting sweep's last 8 s). report(fraction done):
+        the matching its first half, the direct alignments the second."""
         out, gated = [], {}  # per pair: the expected relative rotation and the gate's radius
         direct_used.clear()
-        for i, j in sorted(pairs):
+        for n, (i, j) in enumerate(sorted(pairs)):
+            if n % 50 == 0:
+                report(0.5 * n / len(pairs))
             q = expected[i].inv() * expected[j]
             radius = gate(key_t[j] - key_t[i], q.magnitude())
             gated[(i, j)] = (q, radius)
@@ -508,10 +533,13 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         unreached = [(i, j) for i, j in sorted(pairs) if i not in reached or j not in reached]
         todo = [p for p in unreached if p not in aligned]
         with ThreadPoolExecutor(DIRECT_WORKERS) as pool:
-            for p, match in zip(todo, pool.map(lambda p: align_direct(keyframes[p[0]].image, keyframes[p[1]].image,
-                                                                      direct, gated[p][0]), todo)):
+            for n, (p, match) in enumerate(zip(todo, pool.map(lambda p: align_direct(
+                    keyframes[p[0]].image, keyframes[p[1]].image, direct, gated[p][0]), todo))):
                 aligned[p] = None if match is None else (
                     match.rotation, match.covariance + isotropic(np.radians(PAIR_FLOOR_DEG)))
+                if n % 10 == 0:
+                    report(0.5 + 0.5 * n / len(todo))
+        report(1.0)
         for i, j in unreached:
             q, radius = gated[(i, j)]
             found = aligned[(i, j)]
@@ -532,7 +560,8 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         raw = chain_turns(intervals.rotations)
         near = [p for p in candidate_pairs(key_t, raw, hfov_deg) if key_t[p[1]] - key_t[p[0]] <= LOOP_S]
         # a pair further from the raw gyroscope than it can be off over the time between is a false match
-        found = pairs_within(near, raw, lambda dt, angle: np.radians(PAIR_GATE_DEG) + 3 * gyro.sigma(dt, angle))
+        found = pairs_within(near, raw, lambda dt, angle: np.radians(PAIR_GATE_DEG) + 3 * gyro.sigma(dt, angle),
+                             phase(1))
         if found:  # (without any, the fused orientation stays the start: its gravity corrections hold the tilt)
             theta = calibrate_gyroscope(intervals, found, key_t, gyro, theta_sigma)
             start = chain_turns(intervals.at(theta))
@@ -547,7 +576,8 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         pairs.update(candidate_pairs(key_t, estimate, hfov_deg))
         # a pair further from the estimate than its chain can drift over the time between is a false match
         constraints = chain + pairs_within(pairs, estimate, lambda dt, angle: np.radians(PAIR_GATE_DEG)
-                                           + 3 * gyro.sigma(dt, angle, calibrated=intervals is not None))
+                                           + 3 * gyro.sigma(dt, angle, calibrated=intervals is not None),
+                                           phase(2 + k_round))
         if len(constraints) == len(chain):  # no pair at all: nothing to refine against
             break
         estimate, cost_before, after, theta = solve(estimate, constraints, None, None, intervals, chain_sigma,
