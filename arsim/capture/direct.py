@@ -122,31 +122,41 @@ def align_direct(a: DirectImage, b: DirectImage, images: DirectImages, expected:
             return None
         rays, values = rays[inside], values[inside]
         base = q
+        # a's image and its gradients in one three-channel image: one remap per step gives all three (the same
+        # values as three remaps), kept for the Jacobian, which SciPy asks for at the x it has just evaluated
+        stack = cv2.merge([ga, gxa, gya])
+        constant = (-values, -np.ones_like(values))  # the Jacobian's gain and offset columns
+        last = {}
 
         def sample(x):
-            d = (base * Rotation.from_rotvec(x[:3])).apply(rays)
-            u = (cam.fx * d[:, 0] / d[:, 2] + cam.cx).astype(np.float32)[:, None]
-            v = (cam.fy * d[:, 1] / d[:, 2] + cam.cy).astype(np.float32)[:, None]
-            return d, u, v
+            """b's rays turned by x, and a's image and gradients where they land (the last x's kept)"""
+            key = x.tobytes()
+            if last.get("key") != key:
+                turn = base * Rotation.from_rotvec(x[:3])
+                d = turn.apply(rays)
+                u = (cam.fx * d[:, 0] / d[:, 2] + cam.cx).astype(np.float32)[:, None]
+                v = (cam.fy * d[:, 1] / d[:, 2] + cam.cy).astype(np.float32)[:, None]
+                warped = cv2.remap(stack, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
+                last.update(key=key, turn=turn, d=d, warped=warped)
+            return last["turn"], last["d"], last["warped"]
 
         def residuals(x):
-            _, u, v = sample(x)
-            warped = cv2.remap(ga, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
-            return warped - (x[3] * values + x[4])
+            return sample(x)[2][:, 0] - (x[3] * values + x[4])
 
         def jacobian(x):
-            d, u, v = sample(x)
-            gx = cv2.remap(gxa, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
-            gy = cv2.remap(gya, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
+            turn, d, warped = sample(x)
+            gx, gy = warped[:, 1], warped[:, 2]
             z = d[:, 2]
             # d(pixel)/d(ray) for the pinhole, times d(ray)/d(x) = -Q [b]x (the right perturbation):
             # g (-Q [b]x) = b x (g Q)
-            du = np.stack([cam.fx / z, np.zeros_like(z), -cam.fx * d[:, 0] / z**2], axis=1)
-            dv = np.stack([np.zeros_like(z), cam.fy / z, -cam.fy * d[:, 1] / z**2], axis=1)
-            grad = gx[:, None] * du + gy[:, None] * dv  # (n, 3): d(intensity)/d(ray)
-            q_now = (base * Rotation.from_rotvec(x[:3])).as_matrix()
-            j_rot = np.cross(rays, grad @ q_now)
-            return np.column_stack([j_rot, -values, -np.ones_like(values)])
+            # (written out per column: the same products and sums as through stacked (n, 3) arrays and np.cross)
+            grad = np.empty((len(z), 3))  # d(intensity)/d(ray)
+            grad[:, 0] = gx * (cam.fx / z) + gy * 0.0
+            grad[:, 1] = gx * 0.0 + gy * (cam.fy / z)
+            grad[:, 2] = gx * (-cam.fx * d[:, 0] / z**2) + gy * (-cam.fy * d[:, 1] / z**2)
+            g = grad @ turn.as_matrix()
+            return np.column_stack([rays[:, 1] * g[:, 2] - rays[:, 2] * g[:, 1], rays[:, 2] * g[:, 0] - rays[:, 0] * g[:, 2],
+                                    rays[:, 0] * g[:, 1] - rays[:, 1] * g[:, 0], *constant])
 
         r0 = residuals(np.array([0, 0, 0, 1.0, 0.0]))
         spread = 1.4826 * np.median(np.abs(r0 - np.median(r0))) + 1e-4  # a robust scale to start
