@@ -20,6 +20,9 @@ Per asset (512² angle map of the bundled equirect, nine exponents):
 - errors (mean/max %, README: Conventions) of `sht` and the peer against brute force at --texels random
   disk texels plus the patch around the brightest texel, from the 512² source and from a --fine² angle map
   of the same equirect (4x finer: what the 512² source itself loses);
+- the gap between the two references themselves (brute force over the 512² angle map against the --fine² one,
+  at the fine reference's texels): no map can lie within a tolerance of both where they differ by more
+  than twice it;
 - `sh` at order 256 (coefficients + nine maps) against one ducc0 analysis and nine syntheses of its grid;
 - `sh` with each window: mean error against brute force at orders 8..256, and whether it falls with order.
 """
@@ -286,12 +289,16 @@ def main() -> None:
         # sht from the equirect itself (its own 1024 x 512 texels): nothing resampled before the sums.
         src_s, src_maps = timed_best(3, lambda: sht_maps_from_source(source, 512, EXPONENTS))
         e = errors(reference, src_maps, texels)
-        print(f"  {'sht from equirect vs 512²':<30}{row(e)}   ({src_s:.3f} s)")
+        print(f"  {'sht from equirect vs 512²':<30}{row(e)}   ({src_s:.3f} s; peer/this = {peer_s / src_s:.2f}x)")
         if not args.quick:
             fine = to_layout(source, "anglemap", args.fine)
             start = time.perf_counter()
             fine_texels = reference_texels(env, args.fine_texels)
             fine_ref = brute_force(fine, EXPONENTS, anglemap_directions(512).reshape(-1, 3)[fine_texels])
+            # The two references' own gap: the same sums over the 512² angle map, at the fine reference's texels.
+            coarse = brute_force(env, EXPONENTS, anglemap_directions(512).reshape(-1, 3)[fine_texels])
+            gap = [map_error(fine_ref[:, k], coarse[:, k]) for k in range(len(EXPONENTS))]
+            print(f"  {f'brute force 512² vs {args.fine}²':<30}{row(gap)}")
             e = errors(fine_ref, sht_bake.maps, fine_texels)
             print(f"  {f'sht vs brute force {args.fine}²':<30}{row(e)}   (at {len(fine_texels)} texels; "
                   f"reference {time.perf_counter() - start:.0f} s)")

@@ -8,10 +8,12 @@ probe's coefficients times the lobe's zonal coefficients kappa_l(s) (eq. 2.31/2.
   (`adjoint_synthesis_general`: a NUFFT, accurate to EPSILON) -- one transform shared by all exponents;
 - the weights' own coefficients (a channel of ones) ride along, so each map is divided by the lobe sum
   of the texel weights as `accurate` divides by sum f W;
-- each exponent's map is synthesised directly at the output texels' directions (`synthesis_general`), at
-  the bandlimit its lobe needs: the first band where kappa_l has fallen below TRUNCATION (about
-  sqrt(2 s ln(1/TRUNCATION)) for large s), never below MIN_BANDS, on a Clenshaw-Curtis grid fine
-  enough for the lobe (grid_size), from which a bicubic lookup reads the texels.
+- each exponent's map is synthesised at the bandlimit its lobe needs: the first band where kappa_l has
+  fallen below TRUNCATION (about sqrt(2 s ln(1/TRUNCATION)) for large s), never below MIN_BANDS, on a
+  Clenshaw-Curtis grid fine enough for the lobe (grid_size), from which a bicubic lookup reads the texels;
+- from an equirect source (sht_maps_from_source), whose rows are rings of equal latitude about +y, the
+  texel sums are a ring-based adjoint transform instead (`adjoint_synthesis_2d` on its own grid), and
+  the maps are synthesised in that frame.
 
 Frame and real-SH convention: as sh.py (pole +z, phi = atan2(d_y, -d_x), Condon-Shortley phase, index
 l(l+1)+m); ducc0's complex a_lm (healpy's layout, m >= 0) map to them by c_l0 = a_l0,
@@ -26,8 +28,8 @@ from collections.abc import Sequence
 import ducc0
 import numpy as np
 
-from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, anglemap_solid_angles, equirect_directions,
-                                    equirect_solid_angles)
+from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, anglemap_solid_angles,
+                                    direction_to_equirect_uv, equirect_solid_angles)
 from arsim.core.resample import detect_layout
 from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh_kernel import cubic_lookup_into
@@ -157,13 +159,11 @@ def _weight_map(n: int, exponent: float, bands: int) -> np.ndarray:
     """The lobe sum of the texel weights at every disk texel (the normaliser), through the same
     truncation and grid as the radiance, per (size, exponent): it depends on nothing else, so repeated
     bakes at one size pay for it once."""
-    alm = zonal_scale(texel_sums_alm(np.ones((n, n, 1)), bands - 1, FAST_EPSILON), phong_zonal_coefficients(exponent, bands))
-    size = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
-    grid = synthesise_cc_grid(alm, bands - 1, *size)
-    values = np.zeros((n * n, 1))
-    cubic_lookup_into(values, np.arange(len(disk_locations(n))), grid.reshape(1, -1), *size, *grid_coordinates(n, *size),
-                      np.ones(len(disk_locations(n))))
-    values = values[: len(disk_locations(n)), 0].copy()
+    count = len(disk_locations(n))
+    values = np.zeros((count, 1))
+    _lobe_lookup(texel_sums_alm(np.ones((n, n, 1)), bands - 1, FAST_EPSILON), bands - 1, exponent, bands,
+                 functools.partial(grid_coordinates, n), values, np.arange(count), np.ones(count))
+    values = values[:, 0].copy()
     values.setflags(write=False)
     return values
 
@@ -222,16 +222,10 @@ def sht_map(env: np.ndarray, prepared: tuple[np.ndarray, int], exponent: float, 
     alm, lmax = prepared
     n = env.shape[0]
     bands = min(bands_for_exponent(exponent), lmax + 1)
-    kappa = phong_zonal_coefficients(exponent, bands)
-    # The alm of a smaller lmax are not a prefix in healpy's m-major layout: pick them out.
-    l, m, _ = _alm_index(lmax)
-    keep = (l < bands) & (m < bands)
-    size = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
-    grid = synthesise_cc_grid(zonal_scale(alm[:, keep], kappa), bands - 1, *size)
     if out is None:
         out = np.zeros((n, n, 3), dtype=np.float32)
-    cubic_lookup_into(out.reshape(n * n, 3), _disk_index(n), grid.reshape(3, -1), *size, *grid_coordinates(n, *size),
-                      _weight_map(n, float(exponent), bands))
+    _lobe_lookup(alm, lmax, exponent, bands, functools.partial(grid_coordinates, n), out.reshape(n * n, 3),
+                 _disk_index(n), _weight_map(n, float(exponent), bands))
     return out
 
 
@@ -246,34 +240,107 @@ def sht_maps(env: np.ndarray, exponents: Sequence[float]) -> np.ndarray:
 
 
 def _source_texels(source: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(values (M, 3), loc (M, 2), solid angles (M,)) of every texel of an angle map's disk or an equirect."""
-    if detect_layout(source, "source") == "anglemap":
-        n = source.shape[0]
-        return np.asarray(source, dtype=np.float64)[_disk_mask(n)][:, :3], disk_locations(n), _solid_angles(n)
-    h = source.shape[0]
-    theta, phi = sh_angles(equirect_directions(h).reshape(-1, 3))
-    return (np.asarray(source, dtype=np.float64).reshape(-1, source.shape[2])[:, :3], np.stack([theta, phi], axis=1),
-            equirect_solid_angles(h).ravel())
+    """(values (M, 3), loc (M, 2), solid angles (M,)) of every disk texel of an angle map."""
+    n = source.shape[0]
+    return np.asarray(source, dtype=np.float64)[_disk_mask(n)][:, :3], disk_locations(n), _solid_angles(n)
+
+
+# An equirect's rows are rings of equal latitude about +y: its texel sums are one ring-based adjoint
+# transform (ducc0's Fejer grid, "F1": ring j at theta = (j + 1/2) pi / H, texel k at phi = (k + 1/2) 2 pi / W,
+# each ring weighted by its texels' solid angle), far cheaper than the non-uniform one over its texels. The
+# maps are convolutions with a rotationally symmetric lobe, so they are synthesised in that same frame (pole
+# +y, phi the equirect's u: README, Conventions) and read at the angle map's texels there.
+
+
+@functools.lru_cache(maxsize=4)
+def _equirect_frame_texels(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(theta / pi, phi / 2 pi) of every disk texel of an N x N angle map in the equirect's frame (its v, u)."""
+    uv = direction_to_equirect_uv(anglemap_directions(n)[_disk_mask(n)])
+    out = (np.ascontiguousarray(uv[:, 1]), np.ascontiguousarray(uv[:, 0]))
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def _equirect_frame_coordinates(n: int, n_theta: int, n_phi: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fractional (row, column) of every disk texel of an N x N angle map on the Clenshaw-Curtis grid
+    (n_theta, n_phi) of the equirect's frame."""
+    v, u = _equirect_frame_texels(n)
+    return v * (n_theta - 1), u * n_phi
+
+
+def _equirect_rings(h: int) -> np.ndarray:
+    """The solid angle of a texel in each row of an H x 2H equirect (ducc0's ringfactor)."""
+    return np.ascontiguousarray(equirect_solid_angles(h)[:, 0])
+
+
+def _equirect_alm(planes: np.ndarray, lmax: int) -> np.ndarray:
+    """alm (C, nalm) of sum_i L_i conj(Y_lm(w_i)) W_i over the texels of equirect planes (C, H, 2H), in the
+    equirect's frame, in single precision (as FAST_EPSILON)."""
+    h, w = planes.shape[1:]
+    return np.stack([_SHT.adjoint_synthesis_2d(map=np.ascontiguousarray(p[None], dtype=np.float32), spin=0, lmax=lmax,
+                                               geometry="F1", phi0=np.pi / w, ringfactor=_equirect_rings(h),
+                                               nthreads=threads())[0] for p in planes])
+
+
+def _lobe_lookup(alm: np.ndarray, lmax: int, exponent: float, bands: int, coordinates, out: np.ndarray,
+                 index: np.ndarray, den: np.ndarray) -> None:
+    """One exponent's lobe (its first `bands` bands) applied to alm (C, nalm) of lmax >= bands - 1, synthesised
+    on its grid (grid_size) and read at the texels by coordinates(n_theta, n_phi), divided by den, into
+    out[index] (cubic_lookup_into)."""
+    # The alm of a smaller lmax are not a prefix in healpy's m-major layout: pick them out.
+    l, m, _ = _alm_index(lmax)
+    keep = (l < bands) & (m < bands)
+    size = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
+    grid = synthesise_cc_grid(zonal_scale(alm[:, keep], phong_zonal_coefficients(exponent, bands)), bands - 1, *size)
+    cubic_lookup_into(out, index, grid.reshape(grid.shape[0], -1), *size, *coordinates(*size), den)
+
+
+@functools.lru_cache(maxsize=64)
+def _equirect_weight_map(h: int, n: int, exponent: float, bands: int) -> np.ndarray:
+    """The lobe sum of an H x 2H equirect's texel weights at every disk texel of an N x N angle map (the
+    normaliser, as _weight_map for an angle map), through the same truncation and grid as the radiance.
+    The weights are equal along each ring, so their coefficients are zonal (m = 0) and so is the lobe sum:
+    one column of the grid, synthesised and read in theta alone. Kept per (H, N, exponent)."""
+    alm = _SHT.adjoint_synthesis_2d(map=np.ones((1, h, 2 * h)), spin=0, lmax=bands - 1, mmax=0, geometry="F1",
+                                    phi0=np.pi / (2 * h), ringfactor=_equirect_rings(h), nthreads=threads())
+    n_theta, _ = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
+    # (Four equal columns, read at the second: a lookup whose columns need no wrapping, the maps' own
+    # compiled variant.)
+    columns = _SHT.synthesis_2d(alm=alm * phong_zonal_coefficients(exponent, bands), spin=0, lmax=bands - 1, mmax=0,
+                                geometry="CC", ntheta=n_theta, nphi=4, nthreads=threads())
+    rows, _ = _equirect_frame_coordinates(n, n_theta, 4)
+    values = np.zeros((rows.size, 3), dtype=np.float32)
+    cubic_lookup_into(values, np.arange(rows.size), columns.reshape(1, -1).astype(np.float32), n_theta, 4, rows,
+                      np.ones(rows.size), np.ones(rows.size))
+    values = values[:, 0].astype(np.float64)
+    values.setflags(write=False)
+    return values
 
 
 def sht_maps_from_source(source: np.ndarray, n: int, exponents: Sequence[float]) -> np.ndarray:
     """Maps (E, n, n, 3) float32 from a source at its own resolution and layout (angle map or equirect):
     the texel sums run over the source's texels, so nothing is resampled before the lobe averages (a
     small bright source keeps its energy); the normaliser is the source's own lobe sum of weights."""
-    values, loc, weights = _source_texels(source)
     lmax = max(bands_for_exponent(s) for s in exponents) - 1
+    maps = np.zeros((len(exponents), n * n, 3), dtype=np.float32)
+    if detect_layout(source, "source") == "equirect":
+        h = source.shape[0]
+        alm = _equirect_alm(np.moveaxis(np.asarray(source)[..., :3], 2, 0), lmax)
+        coordinates = functools.partial(_equirect_frame_coordinates, n)
+        for k, s in enumerate(exponents):
+            bands = bands_for_exponent(s)
+            _lobe_lookup(alm, lmax, s, bands, coordinates, maps[k], _disk_index(n), _equirect_weight_map(h, n, float(s), bands))
+        return maps.reshape(len(exponents), n, n, 3)
+    values, loc, weights = _source_texels(source)
     weighted = np.concatenate([values * weights[:, None], weights[:, None]], axis=1).T.astype(np.float32)
     alm = np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=lmax, loc=loc,
                                                    epsilon=FAST_EPSILON, nthreads=threads())[0] for ch in weighted])
-    l, m, _ = _alm_index(lmax)
-    maps = np.zeros((len(exponents), n * n, 3), dtype=np.float32)
-    ones = np.ones(len(disk_locations(n)))
+    count = len(disk_locations(n))
+    coordinates = functools.partial(grid_coordinates, n)
     for k, s in enumerate(exponents):
         bands = bands_for_exponent(s)
-        keep = (l < bands) & (m < bands)
-        size = grid_size(max(bands // 2, bands_for_exponent(s, GRID_TRUNCATION)))
-        grid = synthesise_cc_grid(zonal_scale(alm[:, keep], phong_zonal_coefficients(s, bands)), bands - 1, *size)
-        den = np.zeros((len(ones), 1))
-        cubic_lookup_into(den, np.arange(len(ones)), grid[3:].reshape(1, -1), *size, *grid_coordinates(n, *size), ones)
-        cubic_lookup_into(maps[k], _disk_index(n), grid[:3].reshape(3, -1), *size, *grid_coordinates(n, *size), den[:, 0])
+        den = np.zeros((count, 1))
+        _lobe_lookup(alm[3:], lmax, s, bands, coordinates, den, np.arange(count), np.ones(count))
+        _lobe_lookup(alm[:3], lmax, s, bands, coordinates, maps[k], _disk_index(n), den[:, 0])
     return maps.reshape(len(exponents), n, n, 3)
