@@ -572,7 +572,7 @@ def _probe(path: Path, size: int | None) -> np.ndarray:
 
 
 def _probe_and_source(path: Path, size: int | None) -> tuple[np.ndarray, np.ndarray]:
-    """_probe's angle map, and the image as read (which `sht` may sum at its own resolution)."""
+    """_probe's angle map, and the image as read (which `sht` and `sh` may sum at their own resolution)."""
     image, _ = replace_nonfinite(read_hdr(path), "refuse", str(path))
     layout = detect_layout(image, str(path))
     if layout == "anglemap" and size in (None, image.shape[0]):

@@ -19,7 +19,8 @@ Per asset (512² angle map of the bundled equirect, nine exponents):
   nine kernel products and syntheses, bilinear lookups at the texels), `fast`;
 - errors (mean/max %, README: Conventions) of `sht` and the peer against brute force at --texels random
   disk texels plus the patch around the brightest texel, from the 512² source and from a --fine² angle map
-  of the same equirect (4x finer: what the 512² source itself loses);
+  of the same equirect (4x finer: what the 512² source itself loses), and of `sht` and `sh` at order 256 summed
+  over the equirect's own texels;
 - the gap between the two references themselves (brute force over the 512² angle map against the --fine² one,
   at the fine reference's texels): no map can lie within a tolerance of both where they differ by more
   than twice it;
@@ -307,6 +308,8 @@ def main() -> None:
             print(f"  {f'peer vs brute force {args.fine}²':<30}{row(errors(fine_ref, peer_maps, fine_texels))}")
             e = errors(fine_ref, src_maps, fine_texels)
             print(f"  {f'sht equirect vs {args.fine}²':<30}{row(e)}")
+            sh_src = bake(env, EXPONENTS, "sh", MapParameters(sh_order=256), source=source).maps  # (its own texels)
+            print(f"  {f'sh 256 equirect vs {args.fine}²':<30}{row(errors(fine_ref, sh_src, fine_texels))}")
             worst["sht equirect fine"] = [max(worst["sht equirect fine"][0], max(x.mean_percent for x in e)),
                                           max(worst["sht equirect fine"][1], max(x.max_percent for x in e))]
 

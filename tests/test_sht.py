@@ -201,6 +201,27 @@ def test_sht_from_the_source_itself(bright64):
         assert e.mean_percent <= 0.3 and e.max_percent <= 3.0, (s, e)
 
 
+def test_sh_sums_an_equirect_at_its_own_resolution():
+    """`sh` given an equirect larger than its map sums the equirect's own texels: its coefficients are the
+    NumPy sums sum_i L_i Y_lm(w_i) W_i over them, and the bake says so; --sh-faithful keeps the angle map."""
+    from arsim.lighting.sh import sh_evaluate
+    from arsim.lighting.sht import equirect_texel_sums
+
+    equirect = read_hdr(ENVMAPS[2])[::16, ::16].astype(np.float64)  # 32 x 64
+    equirect[5, 40] += 400.0
+    order = 6
+    basis = sh_evaluate(np.eye(order * order), np.ones((1, order)), equirect_directions(32).reshape(-1, 3))[0]
+    exact = basis.T @ (equirect.reshape(-1, 3) * equirect_solid_angles(32).reshape(-1, 1))
+    np.testing.assert_allclose(equirect_texel_sums(equirect, order), exact, rtol=0, atol=1e-10 * np.abs(exact).max())
+    env = to_layout(equirect, "anglemap", 16)
+    params = MapParameters(sh_order=order)
+    baked = bake(env, [1, 20], "sh", params, source=equirect)
+    assert baked.summed_over == "equirect 64x32 at its own resolution"
+    np.testing.assert_allclose(baked.maps, sh_maps(env, [1, 20], order, coeffs=exact), rtol=1e-6, atol=1e-9)
+    faithful = bake(env, [1, 20], "sh", MapParameters(sh_order=order, sh_faithful=True), source=equirect)
+    assert faithful.summed_over == "angle map"
+
+
 def test_equirect_texel_sums_on_its_rings_are_the_sums_over_its_texels():
     """The ring-based transform of an equirect (rows as rings about +y) gives the exact texel sums
     sum_i L_i conj(Y_lm(w_i)) W_i at each texel's direction in that frame (theta = pi v, phi = 2 pi u),

@@ -21,7 +21,7 @@ from arsim.lighting.fast import fast_coefficients, fast_maps, order_for_exponent
 from arsim.lighting.mc import check_samples, mc_maps
 from arsim.lighting.mipmap import mipmap_maps
 from arsim.lighting.sh import GRID_MAX_ORDER, MAX_ORDER, WINDOWS, sh_coefficients, sh_maps
-from arsim.lighting.sht import bands_for_exponent, sht_map, sht_maps_from_source, sht_prepare
+from arsim.lighting.sht import bands_for_exponent, equirect_texel_sums, sht_map, sht_maps_from_source, sht_prepare
 
 DEFAULT_EXPONENTS = (1, 2, 10, 20, 40, 80, 160, 240, 320, 640, 1280)
 SH_ORDER = 35  # sh: bands 0..SH_ORDER-1, the thesis's order in its figures
@@ -67,10 +67,17 @@ class Method:
     parameters: tuple[str, ...] = ()  # the MapParameters fields it reads (bake.json records those)
     gl: bool = False  # a GL bake (gl_bake.py), held to this NumPy oracle within 1e-3 relative by the tests
     in_loop: bool = False  # can bake tile by tile inside the frame loop (render/baking.py)
+    # (env, source, exponents, params) -> the maps summed over a larger equirect source's own texels, or None
+    # where the method sums the map's texels only (sums_source says when it is used)
+    from_source: Callable[[np.ndarray, np.ndarray, Sequence[float], MapParameters], np.ndarray] | None = None
 
 
 def _sh_prepare(env, exponents, p):
     return sh_coefficients(env, p.sh_order, p.sh_faithful)
+
+
+def _sh_from_source(env, source, exponents, p):
+    return sh_maps(env, exponents, p.sh_order, coeffs=equirect_texel_sums(source, p.sh_order), window=p.sh_window)
 
 
 def _fast_prepare(env, exponents, p):
@@ -93,9 +100,10 @@ METHODS = {
         Method("sh", "spherical harmonics of --sh-order bands convolved with the Phong lobe (Alg. 4.4-4.7)",
                _sh_prepare,
                lambda env, c, s, p: sh_maps(env, [s], p.sh_order, p.sh_faithful, coeffs=c, window=p.sh_window)[0],
-               ("sh_order", "sh_faithful", "sh_window"), in_loop=True),
+               ("sh_order", "sh_faithful", "sh_window"), in_loop=True, from_source=_sh_from_source),
         Method("sht", "exact texel sums and per-exponent syntheses through ducc0's fast SH transforms (fastest)",
-               lambda env, ex, p: sht_prepare(env, ex), lambda env, c, s, p: sht_map(env, c, s)),
+               lambda env, ex, p: sht_prepare(env, ex), lambda env, c, s, p: sht_map(env, c, s),
+               from_source=lambda env, source, ex, p: sht_maps_from_source(source, env.shape[0], ex)),
         # mc bakes every exponent in one pass over the texels (its frames and chain shared): all shared time.
         Method("mc", "Monte Carlo importance sampling with MIP-filtered samples (Colbert and Krivanek)",
                lambda env, ex, p: dict(zip(map(float, ex), mc_maps(env, ex, p.samples, p.seed))),
@@ -144,10 +152,12 @@ GL_METHODS = tuple(name for name, m in METHODS.items() if m.gl)
 LOOP_METHODS = tuple(name for name, m in METHODS.items() if m.in_loop)  # what the frame loop can bake
 
 
-def sums_source(name: str, env: np.ndarray, source: np.ndarray | None) -> bool:
-    """Whether `sht` sums the probe's own texels instead of env's: an equirect source with more texels than
-    the N x N map, which resampling to the map would thin out (a small bright source loses or gains energy)."""
-    return (name == "sht" and source is not None and source.ndim == 3 and source.shape[1] == 2 * source.shape[0]
+def sums_source(name: str, env: np.ndarray, source: np.ndarray | None, params: MapParameters | None = None) -> bool:
+    """Whether the method sums the probe's own texels instead of env's: `sht`, and `sh` but for --sh-faithful
+    (the thesis's formulas sum the angle map), given an equirect source with more texels than the N x N map,
+    which resampling to the map would thin out (a small bright source loses or gains energy)."""
+    return (method(name).from_source is not None and not (name == "sh" and params is not None and params.sh_faithful)
+            and source is not None and source.ndim == 3 and source.shape[1] == 2 * source.shape[0]
             and source.shape[0] * source.shape[1] > env.shape[0] * env.shape[1])
 
 
@@ -155,15 +165,15 @@ def bake(env: np.ndarray, exponents: Sequence[float], name: str, params: MapPara
          progress: Callable[[int], None] | None = None, gl=None, source: np.ndarray | None = None) -> BakeResult:
     """All maps of one method, timed; progress(k) is called after map k is done. With a moderngl context
     `gl`, the GL_METHODS bake on the GL path (float32), all maps in one pass: its time is all shared.
-    source: the probe as read, before it was resampled to env; `sht` sums it at its own resolution where
-    sums_source says so (all its time shared)."""
+    source: the probe as read, before it was resampled to env; `sht` and `sh` sum it at its own resolution
+    where sums_source says so (all its time shared)."""
     params = params or MapParameters()
     params.check()
     check_inputs(env, exponents)
     m = method(name)
-    if sums_source(name, env, source):
+    if sums_source(name, env, source, params):
         start = time.perf_counter()
-        maps = sht_maps_from_source(source, env.shape[0], exponents)
+        maps = m.from_source(env, source, list(exponents), params)
         if progress is not None:
             progress(len(exponents))
         if not np.isfinite(maps).all():

@@ -29,7 +29,7 @@ import ducc0
 import numpy as np
 
 from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, anglemap_solid_angles,
-                                    direction_to_equirect_uv, equirect_solid_angles)
+                                    direction_to_equirect_uv, equirect_directions, equirect_solid_angles)
 from arsim.core.resample import detect_layout
 from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh_kernel import cubic_lookup_into
@@ -316,6 +316,20 @@ def _equirect_weight_map(h: int, n: int, exponent: float, bands: int) -> np.ndar
     values = values[:, 0].astype(np.float64)
     values.setflags(write=False)
     return values
+
+
+def equirect_texel_sums(source: np.ndarray, order: int) -> np.ndarray:
+    """SH coefficients (order^2, 3) of an equirect (H, 2H, C) summed over its own texels with their solid
+    angles (to EPSILON), in the SH frame, as texel_sums has them for an angle map: what `sh` sums an equirect
+    larger than its map by (methods.sums_source)."""
+    h = source.shape[0]
+    theta, phi = sh_angles(equirect_directions(h).reshape(-1, 3))
+    loc = np.stack([theta, phi], axis=1)
+    weighted = (np.asarray(source, dtype=np.float64).reshape(-1, source.shape[2])[:, :3]
+                * equirect_solid_angles(h).reshape(-1, 1)).T
+    alm = np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=order - 1, loc=loc,
+                                                   epsilon=EPSILON, nthreads=threads())[0] for ch in weighted])
+    return real_from_alm(alm, order)
 
 
 def sht_maps_from_source(source: np.ndarray, n: int, exponents: Sequence[float]) -> np.ndarray:
