@@ -222,6 +222,33 @@ def test_sh_sums_an_equirect_at_its_own_resolution():
     assert faithful.summed_over == "angle map"
 
 
+def test_texel_sums_are_the_same_bits_while_the_cores_are_busy():
+    """The adjoint transform's sums do not depend on its threads' timing: with another thread keeping a core
+    busy (where ducc0's own threads on one channel gave different last bits nearly every time), every
+    repetition equals the first, bit for bit."""
+    import threading
+
+    from arsim.lighting.sht import FAST_EPSILON, adjoint_at, disk_locations
+
+    loc = disk_locations(128)
+    planes = np.random.default_rng(0).random((3, len(loc))).astype(np.float32)
+    stop = threading.Event()
+
+    def busy():
+        a = np.random.default_rng(1).random((200, 200))
+        while not stop.is_set():
+            a @ a
+
+    worker = threading.Thread(target=busy)
+    worker.start()
+    try:
+        first = adjoint_at(planes, loc, 40, FAST_EPSILON)
+        assert all(np.array_equal(adjoint_at(planes, loc, 40, FAST_EPSILON), first) for _ in range(20))
+    finally:
+        stop.set()
+        worker.join()
+
+
 def test_equirect_texel_sums_on_its_rings_are_the_sums_over_its_texels():
     """The ring-based transform of an equirect (rows as rings about +y) gives the exact texel sums
     sum_i L_i conj(Y_lm(w_i)) W_i at each texel's direction in that frame (theta = pi v, phi = 2 pi u),

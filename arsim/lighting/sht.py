@@ -23,7 +23,9 @@ c_lm = sqrt2 Re a_lm, c_l(-m) = -sqrt2 Im a_lm.
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import ducc0
 import numpy as np
@@ -115,9 +117,19 @@ def texel_sums_alm(env: np.ndarray, lmax: int, epsilon: float = EPSILON) -> np.n
     inside = _disk_mask(n)
     dtype = np.float32 if epsilon > 1e-6 else np.float64
     weighted = (np.asarray(env, dtype=np.float64)[inside] * _solid_angles(n)[:, None]).T.astype(dtype)
-    loc = disk_locations(n)
-    return np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=lmax, loc=loc,
-                                                    epsilon=epsilon, nthreads=threads())[0] for ch in weighted])
+    return adjoint_at(weighted, disk_locations(n), lmax, epsilon)
+
+
+def adjoint_at(planes: np.ndarray, loc: np.ndarray, lmax: int, epsilon: float) -> np.ndarray:
+    """ducc0 alm (C, nalm) of sum_i planes[c, i] conj(Y_lm(loc_i)) (ducc0's adjoint non-uniform transform), a
+    channel per thread. Its own threads would share one channel's spreading onto the grid, whose sums then
+    come in an order that depends on their timing: under load the same input gave different last bits."""
+    def one(channel):
+        return _SHT.adjoint_synthesis_general(map=np.ascontiguousarray(channel[None]), spin=0, lmax=lmax, loc=loc,
+                                              epsilon=epsilon, nthreads=1)[0]
+
+    with ThreadPoolExecutor(max(1, min(len(planes), os.cpu_count() or 1))) as pool:
+        return np.stack(list(pool.map(one, planes)))
 
 
 def texel_sums(env: np.ndarray, order: int) -> np.ndarray:
@@ -239,12 +251,6 @@ def sht_maps(env: np.ndarray, exponents: Sequence[float]) -> np.ndarray:
     return maps
 
 
-def _source_texels(source: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(values (M, 3), loc (M, 2), solid angles (M,)) of every disk texel of an angle map."""
-    n = source.shape[0]
-    return np.asarray(source, dtype=np.float64)[_disk_mask(n)][:, :3], disk_locations(n), _solid_angles(n)
-
-
 # An equirect's rows are rings of equal latitude about +y: its texel sums are one ring-based adjoint
 # transform (ducc0's Fejer grid, "F1": ring j at theta = (j + 1/2) pi / H, texel k at phi = (k + 1/2) 2 pi / W,
 # each ring weighted by its texels' solid angle), far cheaper than the non-uniform one over its texels. The
@@ -327,9 +333,7 @@ def equirect_texel_sums(source: np.ndarray, order: int) -> np.ndarray:
     loc = np.stack([theta, phi], axis=1)
     weighted = (np.asarray(source, dtype=np.float64).reshape(-1, source.shape[2])[:, :3]
                 * equirect_solid_angles(h).reshape(-1, 1)).T
-    alm = np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=order - 1, loc=loc,
-                                                   epsilon=EPSILON, nthreads=threads())[0] for ch in weighted])
-    return real_from_alm(alm, order)
+    return real_from_alm(adjoint_at(weighted, loc, order - 1, EPSILON), order)
 
 
 def sht_maps_from_source(source: np.ndarray, n: int, exponents: Sequence[float]) -> np.ndarray:
@@ -346,10 +350,9 @@ def sht_maps_from_source(source: np.ndarray, n: int, exponents: Sequence[float])
             bands = bands_for_exponent(s)
             _lobe_lookup(alm, lmax, s, bands, coordinates, maps[k], _disk_index(n), _equirect_weight_map(h, n, float(s), bands))
         return maps.reshape(len(exponents), n, n, 3)
-    values, loc, weights = _source_texels(source)
-    weighted = np.concatenate([values * weights[:, None], weights[:, None]], axis=1).T.astype(np.float32)
-    alm = np.stack([_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(ch[None]), spin=0, lmax=lmax, loc=loc,
-                                                   epsilon=FAST_EPSILON, nthreads=threads())[0] for ch in weighted])
+    # an angle map: its radiance and its texel weights (a channel of ones), summed over its disk texels
+    alm = texel_sums_alm(np.concatenate([np.asarray(source)[..., :3], np.ones(source.shape[:2] + (1,))], axis=-1),
+                         lmax, FAST_EPSILON)
     count = len(disk_locations(n))
     coordinates = functools.partial(grid_coordinates, n)
     for k, s in enumerate(exponents):
