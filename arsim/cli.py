@@ -895,7 +895,9 @@ def _bake_parser(sub: argparse._SubParsersAction) -> None:
                  "arsim bake assets/envmaps/courtyard.exr -o maps --method fast --size 512 --spec 1,10,80")
     _map_options(p)
     p.add_argument("--method", choices=list(METHODS), default="fast",
-                   help="; ".join(f"{m.name}: {m.summary}" for m in METHODS.values()) + " (default fast)")
+                   help="; ".join(f"{m.name}: {m.summary}" for m in METHODS.values()) + " (default fast). "
+                        + " and ".join(n for n, m in METHODS.items() if m.from_source) + " sum an equirect ENV with more "
+                        "texels than the N x N maps at its own resolution (bake.json: summed_over)")
     p.set_defaults(run=cmd_bake)
 
 
