@@ -208,7 +208,7 @@ def transforms(names) -> None:
     def grids(lmax):
         for s in EXPONENTS:
             bands = min(sht.bands_for_exponent(s), lmax + 1)
-            yield s, bands, sht.grid_size(max(bands // 2, sht.bands_for_exponent(s, sht.GRID_TRUNCATION)))
+            yield s, bands, sht.grid_size(s, bands)
 
     def with_shtns(env):
         alm, lmax = sht.sht_prepare(env, EXPONENTS)

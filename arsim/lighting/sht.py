@@ -219,12 +219,15 @@ def grid_coordinates(n: int, n_theta: int, n_phi: int) -> tuple[np.ndarray, np.n
     return rows, cols
 
 
-def grid_size(bands: int) -> tuple[int, int]:
-    """(n_theta, n_phi) of the grid an exponent's map is synthesised on: GRID_SAMPLES_PER_BAND samples
-    per band in theta of the bands above GRID_TRUNCATION, so that the bicubic lookup's error stays far below
-    the truncation's; for the irradiance lobe's long tail of small bands, two samples per band (measured:
-    as accurate as four, at a quarter of the grid)."""
-    n_theta = GRID_SAMPLES_PER_BAND * bands + 1
+def grid_size(exponent: float, bands: int) -> tuple[int, int]:
+    """(n_theta, n_phi) of the grid an exponent's map (its first `bands` bands) is synthesised on:
+    GRID_SAMPLES_PER_BAND samples per band in theta of the bands above GRID_TRUNCATION, so that the bicubic
+    lookup's error stays far below the truncation's, and at least one per band of all it carries: the
+    irradiance lobe's long tail of small bands (303 bands, all but 48 below 1e-4). Measured on the bundled
+    probes at 512² against brute force: the same worst mean error as with two samples a band for that tail,
+    worst max 0.12/0.35/0.17 % against 0.11/0.35/0.17 % (README: `sht`), at half its grid's rows; with three
+    samples a band above 1e-4 instead of four, 2.5 times the error."""
+    n_theta = GRID_SAMPLES_PER_BAND * max(-(-bands // GRID_SAMPLES_PER_BAND), bands_for_exponent(exponent, GRID_TRUNCATION)) + 1
     return n_theta, 2 * (n_theta - 1)
 
 
@@ -297,7 +300,7 @@ def _lobe_lookup(alm: np.ndarray, lmax: int, exponent: float, bands: int, coordi
     # The alm of a smaller lmax are not a prefix in healpy's m-major layout: pick them out.
     l, m, _ = _alm_index(lmax)
     keep = (l < bands) & (m < bands)
-    size = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
+    size = grid_size(exponent, bands)
     grid = synthesise_cc_grid(zonal_scale(alm[:, keep], phong_zonal_coefficients(exponent, bands)), bands - 1, *size)
     cubic_lookup_into(out, index, grid.reshape(grid.shape[0], -1), *size, *coordinates(*size), den)
 
@@ -310,7 +313,7 @@ def _equirect_weight_map(h: int, n: int, exponent: float, bands: int) -> np.ndar
     one column of the grid, synthesised and read in theta alone. Kept per (H, N, exponent)."""
     alm = _SHT.adjoint_synthesis_2d(map=np.ones((1, h, 2 * h)), spin=0, lmax=bands - 1, mmax=0, geometry="F1",
                                     phi0=np.pi / (2 * h), ringfactor=_equirect_rings(h), nthreads=threads())
-    n_theta, _ = grid_size(max(bands // 2, bands_for_exponent(exponent, GRID_TRUNCATION)))
+    n_theta, _ = grid_size(exponent, bands)
     # (Four equal columns, read at the second: a lookup whose columns need no wrapping, the maps' own
     # compiled variant.)
     columns = _SHT.synthesis_2d(alm=alm * phong_zonal_coefficients(exponent, bands), spin=0, lmax=bands - 1, mmax=0,
