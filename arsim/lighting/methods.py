@@ -70,6 +70,7 @@ class Method:
     # (env, source, exponents, params) -> the maps summed over a larger equirect source's own texels, or None
     # where the method sums the map's texels only (sums_source says when it is used)
     from_source: Callable[[np.ndarray, np.ndarray, Sequence[float], MapParameters], np.ndarray] | None = None
+    source_unless: str = ""  # a MapParameters flag that, set, keeps the method on the map's texels
 
 
 def _sh_prepare(env, exponents, p):
@@ -100,7 +101,8 @@ METHODS = {
         Method("sh", "spherical harmonics of --sh-order bands convolved with the Phong lobe (Alg. 4.4-4.7)",
                _sh_prepare,
                lambda env, c, s, p: sh_maps(env, [s], p.sh_order, p.sh_faithful, coeffs=c, window=p.sh_window)[0],
-               ("sh_order", "sh_faithful", "sh_window"), in_loop=True, from_source=_sh_from_source),
+               ("sh_order", "sh_faithful", "sh_window"), in_loop=True, from_source=_sh_from_source,
+               source_unless="sh_faithful"),  # (the thesis's formulas walk the angle map's rings)
         Method("sht", "exact texel sums and per-exponent syntheses through ducc0's fast SH transforms (fastest)",
                lambda env, ex, p: sht_prepare(env, ex), lambda env, c, s, p: sht_map(env, c, s),
                from_source=lambda env, source, ex, p: sht_maps_from_source(source, env.shape[0], ex)),
@@ -153,10 +155,11 @@ LOOP_METHODS = tuple(name for name, m in METHODS.items() if m.in_loop)  # what t
 
 
 def sums_source(name: str, env: np.ndarray, source: np.ndarray | None, params: MapParameters | None = None) -> bool:
-    """Whether the method sums the probe's own texels instead of env's: `sht`, and `sh` but for --sh-faithful
-    (the thesis's formulas sum the angle map), given an equirect source with more texels than the N x N map,
-    which resampling to the map would thin out (a small bright source loses or gains energy)."""
-    return (method(name).from_source is not None and not (name == "sh" and params is not None and params.sh_faithful)
+    """Whether the method sums the probe's own texels instead of env's: one with a from_source path (unless its
+    source_unless flag is set in params), given an equirect source with more texels than the N x N map, which
+    resampling to the map would thin out (a small bright source loses or gains energy)."""
+    m = method(name)
+    return (m.from_source is not None and not (m.source_unless and getattr(params or MapParameters(), m.source_unless))
             and source is not None and source.ndim == 3 and source.shape[1] == 2 * source.shape[0]
             and source.shape[0] * source.shape[1] > env.shape[0] * env.shape[1])
 
