@@ -40,6 +40,7 @@ of one frame's contribution.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -154,8 +155,38 @@ def merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, r, c, 
     return bound[r, c, ch] if bound[r, c, ch] > 0.0 else -1.0
 
 
+CHUNK = 64  # disk texels per chunk of the frame's culling (consecutive in the map's rows: close on the sphere)
+
+
+def chunk_cones(directions: np.ndarray, chunk: int = CHUNK) -> np.ndarray:
+    """Per chunk of `chunk` consecutive texel directions (K, 3): (axis x, y, z, angular radius in radians), a
+    cone that holds every direction of the chunk (its radius rounded up: the culling must never drop a texel)."""
+    count = -(-len(directions) // chunk)
+    padded = np.concatenate([directions, np.repeat(directions[-1:], count * chunk - len(directions), axis=0)])
+    groups = padded.reshape(count, chunk, 3)
+    axis = groups.sum(axis=1)
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    radius = np.arccos(np.clip(np.einsum("gkc,gc->gk", groups, axis).min(axis=1), -1.0, 1.0))
+    return np.column_stack([axis, radius + 1e-6])
+
+
+@numba.njit(cache=True, nogil=True)
+def _chunks_in_view(cones, optical_axis, min_cos):
+    """Indices of the chunks whose cone (chunk_cones) meets the frame's: directions within acos(min_cos) of the
+    optical axis (world)."""
+    reach = math.acos(max(min(min_cos, 1.0), -1.0))
+    found = np.empty(cones.shape[0], np.int64)
+    count = 0
+    for g in range(cones.shape[0]):
+        dot = cones[g, 0] * optical_axis[0] + cones[g, 1] * optical_axis[1] + cones[g, 2] * optical_axis[2]
+        if math.acos(max(min(dot, 1.0), -1.0)) <= reach + cones[g, 3]:
+            found[count] = g
+            count += 1
+    return found[:count]
+
+
 @numba.njit(cache=True, parallel=True, nogil=True)
-def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, codes, radiance_of_code, hat,
+def _accumulate(directions, rows, cols, chunks, world_to_camera, intrinsics, min_cos, codes, radiance_of_code, hat,
                 centre, exposure, sums, weights, clipped_votes, unclipped_votes, variances, level, bound, radiance,
                 gain, full_well, read_noise):
     """For every disk texel (directions (K, 3), at rows, cols of the maps) inside the frame: add the
@@ -163,12 +194,16 @@ def _accumulate(directions, rows, cols, world_to_camera, intrinsics, min_cos, co
     unclipped_votes, or, where any of the four pixels is clipped, its vote to clipped_votes and raise
     bound; then merge the texel's radiance anew. radiance_of_code (256, 3): this frame's radiance per
     code before vignetting; centre (H, W, 2): the pixel weights and the fall-off divided out of the
-    radiance."""
+    radiance. Only the texels of `chunks` (_chunks_in_view) are visited: a frame sees a few per cent of the
+    sphere, and its texels, one blob of the map, split by rows between the threads left one of them idle."""
     fx, fy, cx, cy, k1, k2 = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3], intrinsics[4], intrinsics[5]
     height, width = codes.shape[0], codes.shape[1]
     m = world_to_camera
     trust = exposure * exposure
-    for k in numba.prange(directions.shape[0]):
+    for i in numba.prange(chunks.size * CHUNK):
+        k = chunks[i // CHUNK] * CHUNK + i % CHUNK
+        if k >= directions.shape[0]:
+            continue
         w0, w1, w2 = directions[k, 0], directions[k, 1], directions[k, 2]
         d2 = m[2, 0] * w0 + m[2, 1] * w1 + m[2, 2] * w2
         if d2 < min_cos:  # outside the cone around the optical axis that holds the frame
@@ -222,6 +257,7 @@ class ProbeAccumulator:
         inside = anglemap_disk_mask(size)
         self.rows, self.cols = (a.astype(np.int32) for a in np.nonzero(inside))
         self.directions = anglemap_directions(size)[inside].astype(np.float64)
+        self.cones = chunk_cones(self.directions)
         # Per pixel: (centre weight, vignetting fall-off), as the kernel reads both at once.
         self.centre = np.ascontiguousarray(np.stack([centre_weights(camera, falloff), falloff.astype(np.float32)], axis=-1))
         self.intrinsics = np.array([camera.fx, camera.fy, camera.cx, camera.cy, camera.k1, camera.k2])
@@ -247,8 +283,9 @@ class ProbeAccumulator:
         relative exposure its codes encode; squared, the trust of the code weights), its exposure level
         (0: the longest) and its gain (ISO over base ISO: for its samples' noise)."""
         full_well, read_noise = (self.sensor.full_well_e, self.sensor.read_noise_e) if self.sensor else (0.0, 0.0)
-        _accumulate(self.directions, self.rows, self.cols, np.ascontiguousarray(np.asarray(camera_to_world).T),
-                    self.intrinsics, self.min_cos, codes, np.ascontiguousarray(radiance_of_code, dtype=np.float64),
+        world_to_camera = np.ascontiguousarray(np.asarray(camera_to_world).T)
+        chunks = _chunks_in_view(self.cones, np.ascontiguousarray(world_to_camera[2]), self.min_cos)
+        _accumulate(self.directions, self.rows, self.cols, chunks, world_to_camera, self.intrinsics, self.min_cos, codes, np.ascontiguousarray(radiance_of_code, dtype=np.float64),
                     self.hats[level], self.centre, float(exposure), *self.levels, level, self.bound, self.radiance,
                     float(gain), float(full_well), float(read_noise))
 
