@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from arsim.capture.accumulate import ProbeAccumulator, SensorNoise, accumulate_reference, clip_corrected
+from arsim.capture.accumulate import (CHUNK, ProbeAccumulator, SensorNoise, _chunks_in_view, accumulate_reference,
+                                     clip_corrected)
 from arsim.capture.align import Aligner
 from arsim.capture.response import RecoveredResponse, calibrate_response, response_error
 from arsim.core.conventions import CameraIntrinsics, anglemap_directions, anglemap_disk_mask
@@ -58,6 +59,22 @@ def test_compiled_accumulation_equals_the_numpy_oracle(level):
         assert (oracle > 0).sum() > 100 and not compiled[1 - level].any()
         np.testing.assert_allclose(compiled[level], oracle, rtol=1e-4, atol=1e-12)
     assert acc.clipped_only().any()  # texels behind the clipped rows keep a lower bound only
+
+
+def test_the_frame_culling_keeps_every_texel_in_view():
+    """The accumulation visits only the chunks whose cone meets the frame's: every texel the frame's cone holds
+    lies in one of them, at any orientation (and near the rim, whose chunks span the widest angles)."""
+    camera = CameraIntrinsics.from_fov(640, 480, 62.0, k1=-0.05, k2=0.01)
+    acc = ProbeAccumulator(256, camera, np.ones((480, 640)))
+    rotations = Rotation.random(200, random_state=3).as_matrix()
+    rotations[0] = Rotation.from_euler("y", 180, degrees=True).as_matrix()  # looking at -z: the rim
+    for rotation in rotations:
+        axis = np.ascontiguousarray(rotation.T[2])
+        visited = np.zeros(len(acc.cones) * CHUNK, bool)
+        visited.reshape(-1, CHUNK)[_chunks_in_view(acc.cones, axis, acc.min_cos)] = True
+        seen = acc.directions @ axis >= acc.min_cos
+        assert seen.any() and visited[:len(seen)][seen].all()
+        assert visited.mean() < 2 * seen.mean()  # (and it culls: at most twice the texels in view)
 
 
 def test_the_mean_of_gaussian_samples_clipped_at_zero_is_recovered():

@@ -155,7 +155,7 @@ def merged_radiance(sums, weights, clipped_votes, unclipped_votes, bound, r, c, 
     return bound[r, c, ch] if bound[r, c, ch] > 0.0 else -1.0
 
 
-CHUNK = 64  # disk texels per chunk of the frame's culling (consecutive in the map's rows: close on the sphere)
+CHUNK = 64  # disk texels per chunk of the frame's culling (ProbeAccumulator orders them tile by tile)
 
 
 def chunk_cones(directions: np.ndarray, chunk: int = CHUNK) -> np.ndarray:
@@ -255,8 +255,12 @@ class ProbeAccumulator:
         self.size, self.camera = size, camera
         self.sensor = sensor
         inside = anglemap_disk_mask(size)
-        self.rows, self.cols = (a.astype(np.int32) for a in np.nonzero(inside))
-        self.directions = anglemap_directions(size)[inside].astype(np.float64)
+        rows, cols = np.nonzero(inside)
+        # The disk texels in 8 x 8 tiles (the kernel's chunks of 64 stay compact on the sphere), each texel's
+        # work its own: the order changes no value.
+        order = np.lexsort((cols, rows, cols // 8, rows // 8))
+        self.rows, self.cols = rows[order].astype(np.int32), cols[order].astype(np.int32)
+        self.directions = np.ascontiguousarray(anglemap_directions(size)[self.rows, self.cols], dtype=np.float64)
         self.cones = chunk_cones(self.directions)
         # Per pixel: (centre weight, vignetting fall-off), as the kernel reads both at once.
         self.centre = np.ascontiguousarray(np.stack([centre_weights(camera, falloff), falloff.astype(np.float32)], axis=-1))
