@@ -304,7 +304,9 @@ class ProbeAccumulator:
 
     def covered(self) -> np.ndarray:
         """(N, N) bool: texels with a value in every channel (measured, or a clipped lower bound)."""
-        return np.all(self.radiance >= 0.0, axis=-1)  # merged_radiance's -1: neither
+        # merged_radiance's -1: neither (channel by channel: np.all over the last axis took 9x as long)
+        r = self.radiance
+        return (r[..., 0] >= 0.0) & (r[..., 1] >= 0.0) & (r[..., 2] >= 0.0)
 
     def clipped_only(self) -> np.ndarray:
         """(N, N) bool: texels where some channel is only a lower bound (always seen clipped)."""

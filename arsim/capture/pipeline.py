@@ -225,7 +225,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     for k, codes in enumerate(read_frames(files)):  # (decoded ahead, overlapping the alignment)
         if settings.refine and settings.align_every and kept_bytes + codes.nbytes <= KEEP_DECODED_BYTES:
             decoded[k], kept_bytes = codes, kept_bytes + codes.nbytes
-        any_unclipped |= bool(np.any(codes < 255))
+        any_unclipped = any_unclipped or bool(np.any(codes < 255))
         exposure_scale = scales[k]
         drift.predict(k)
         predicted = drift.correction() * uncorrected[k]
