@@ -289,7 +289,8 @@ class ProbeAccumulator:
         full_well, read_noise = (self.sensor.full_well_e, self.sensor.read_noise_e) if self.sensor else (0.0, 0.0)
         world_to_camera = np.ascontiguousarray(np.asarray(camera_to_world).T)
         chunks = _chunks_in_view(self.cones, np.ascontiguousarray(world_to_camera[2]), self.min_cos)
-        _accumulate(self.directions, self.rows, self.cols, chunks, world_to_camera, self.intrinsics, self.min_cos, codes, np.ascontiguousarray(radiance_of_code, dtype=np.float64),
+        _accumulate(self.directions, self.rows, self.cols, chunks, world_to_camera, self.intrinsics, self.min_cos,
+                    codes, np.ascontiguousarray(radiance_of_code, dtype=np.float64),
                     self.hats[level], self.centre, float(exposure), *self.levels, level, self.bound, self.radiance,
                     float(gain), float(full_well), float(read_noise))
 
