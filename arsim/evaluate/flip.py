@@ -6,7 +6,9 @@ worker imports little more than NumPy.
 
 from __future__ import annotations
 
+import collections
 import contextlib
+import functools
 import multiprocessing
 import os
 import sys
@@ -89,20 +91,52 @@ def _passive_openmp() -> None:
 
 class FlipWorker:
     """masked_flip and flip_map run beside the caller: each call returns a Future of the value they give
-    (flip_worker makes one)."""
+    (flip_worker makes one). settle lets the caller take a share of the calls still waiting."""
 
     def __init__(self, submit: Callable[..., Future]):
         self._submit = submit
+        self._waiting = collections.deque()  # (ours, the worker's, function, args) of the calls not yet done
+
+    def _call(self, function: Callable, *args) -> Future:
+        theirs = self._submit(function, *args)
+        if theirs.done():  # (computed in turn: _done)
+            return theirs
+        ours = Future()
+        theirs.add_done_callback(functools.partial(_copy_outcome, ours))
+        while self._waiting and self._waiting[0][1].done():  # (the worker takes them in order)
+            self._waiting.popleft()
+        self._waiting.append((ours, theirs, function, args))
+        return ours
 
     def score(self, reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> Future:
         """masked_flip's value; only the mask's box travels (the box of the box is the box itself, so the
         value is masked_flip's exactly). The AR session's scorer."""
         box = flip_box(mask, FLIP_RADIUS)
-        return self._submit(masked_flip, reference[box], test[box], mask[box])
+        return self._call(masked_flip, reference[box], test[box], mask[box])
 
     def error_map(self, a: np.ndarray, b: np.ndarray, where: np.ndarray) -> Future:
         """flip_map's (H, W) map with its default margin."""
-        return self._submit(flip_map, a, b, where)
+        return self._call(flip_map, a, b, where)
+
+    def settle(self) -> None:
+        """The calls the worker has not begun, computed here from the last while it works from the first,
+        until it has begun them all: the caller, done with its own work, halves the worker's backlog instead
+        of waiting for all of it. The values are the worker's (the same function of the same arguments)."""
+        _passive_openmp()  # (as in the worker: where this process has not started OpenMP yet)
+        while self._waiting:
+            ours, theirs, function, args = self._waiting.pop()
+            if theirs.cancel():  # (not begun: it never will be)
+                try:
+                    ours.set_result(function(*args))
+                except Exception as e:
+                    ours.set_exception(e)
+
+
+def _copy_outcome(ours: Future, theirs: Future) -> None:
+    """The worker's outcome given to the caller's future (a call cancelled by settle is computed there)."""
+    if not theirs.cancelled():
+        error = theirs.exception()
+        ours.set_exception(error) if error is not None else ours.set_result(theirs.result())
 
 
 def _done(function, *args) -> Future:

@@ -162,7 +162,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                 progress: Callable[[float], None] = lambda fraction: None,
                 estimates: dict[str, tuple[dict[str, MapSet], list[SceneObject]]] | None = None,
                 tracked: dict[int, tuple[TagPose, float]] | None = None,
-                error_map: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray | Future] | None = None) -> SessionResult:
+                error_map: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray | Future] | None = None,
+                after_loop: Callable[[list], None] | None = None, settle: Callable[[], None] | None = None) -> SessionResult:
     """Run the AR session over an AR recording (rec: its ar/ part) with the virtual objects lit by `maps`
     (a set per method: from the captured probe, or baked before) and truth frames lit by
     `truth_maps` (the same from the true environment), each frame scored against its truth frame by
@@ -174,7 +175,10 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     tracked: the frames' poses and tracking times from an earlier session over the same recording with the same
     tracker (SessionResult.tracked gives them), which are not tracked again. error_map: (truth frame, frame, mask) ->
     the error map (H, W) whose mean over the mask is the score (or its Future); where given, the estimates' frames
-    hold their error maps ("errors": the estimates' frames show them) and their scores are those means."""
+    hold their error maps ("errors": the estimates' frames show them) and their scores are those means.
+    after_loop: called with the loop's FrameRecords once the last frame is drawn, before the scores are awaited
+    (work that needs no score, done while a scorer beside the loop finishes). settle: then called to take a
+    share of the scores not yet begun (FlipWorker.settle)."""
     ctx = create_gl_context()
     camera, tracker = _camera_and_tracker(rec, linear_of_code, settings)
     captured = _renderer(camera, maps, ctx, settings.method, objects)
@@ -244,6 +248,10 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
                 write_bytes_atomic(out_dir / "frames" / f"{k:06d}.png", png_bytes(out))
             if n % 10 == 0 or n == count - 1:
                 progress((n + 1) / count)
+    if after_loop is not None:
+        after_loop(records)
+    if settle is not None:
+        settle()
     for n, value in pending.items():
         flips[n] = _value(value)
     estimate_scores = {name: {k: _value(v) for k, v in scores.items()} for name, scores in estimate_scores.items()}

@@ -274,7 +274,7 @@ def render_session(scenario: Scenario, out: Path, settings: SessionSettings, map
     with stage(f"rendering the AR session ({', '.join(needed)} maps)") as update, flip_worker() as flip:
         session = run_session(ar, response.linear[:, 1], maps, truth_maps, out, light_objects(objects, probe), flip.score,
                               settings, truth_objects=light_objects(objects, truth) if truth is not None else None,
-                              progress=lambda f: update(completed=f))
+                              progress=lambda f: update(completed=f), settle=flip.settle)
     metrics = session_metrics(ar, session)[1] | {"method": settings.method, "methods": needed, "map_size": map_size,
                                                  "log_average": settings.log_average, "probe": source}
     if truth_maps is not None and lit_by_truth(maps, truth_maps):
