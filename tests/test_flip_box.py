@@ -77,3 +77,15 @@ def test_the_workers_scores_are_masked_flips_and_an_interruption_drops_the_rest(
             futures = [flip.score(a, b, where) for _ in range(40)]
             raise KeyboardInterrupt
     assert any(f.cancelled() for f in futures)  # (not all 40 computed before the worker stopped)
+
+
+def test_settle_takes_the_calls_not_yet_begun_from_the_back_with_the_workers_values(frames):
+    from arsim.evaluate.flip import flip_worker
+
+    a, b, where = frames
+    expected = masked_flip(a, b, where)
+    with flip_worker() as flip:
+        futures = [flip.score(a, b, where) for _ in range(16)]
+        flip.settle()
+        assert flip.taken > 0  # (the worker is handed two at a time: the rest wait to be taken)
+        assert [f.result() for f in futures] == [expected] * 16

@@ -96,6 +96,7 @@ class FlipWorker:
     def __init__(self, submit: Callable[..., Future]):
         self._submit = submit
         self._waiting = collections.deque()  # (ours, the worker's, function, args) of the calls not yet done
+        self.taken = 0  # calls settle computed here
 
     def _call(self, function: Callable, *args) -> Future:
         theirs = self._submit(function, *args)
@@ -125,7 +126,11 @@ class FlipWorker:
         _passive_openmp()  # (as in the worker: where this process has not started OpenMP yet)
         while self._waiting:
             ours, theirs, function, args = self._waiting.pop()
+            # (ours running first: the worker's cancellation then leaves it to be computed here)
+            if theirs.done() or not ours.set_running_or_notify_cancel():
+                continue
             if theirs.cancel():  # (not begun: it never will be)
+                self.taken += 1
                 try:
                     ours.set_result(function(*args))
                 except Exception as e:
@@ -133,10 +138,14 @@ class FlipWorker:
 
 
 def _copy_outcome(ours: Future, theirs: Future) -> None:
-    """The worker's outcome given to the caller's future (a call cancelled by settle is computed there)."""
-    if not theirs.cancelled():
-        error = theirs.exception()
-        ours.set_exception(error) if error is not None else ours.set_result(theirs.result())
+    """The worker's outcome given to the caller's future: cancelled with it (the worker stopped), except where
+    settle took the call (then running, it cannot be cancelled, and settle gives its value)."""
+    if theirs.cancelled():
+        ours.cancel()
+    elif (error := theirs.exception()) is not None:
+        ours.set_exception(error)
+    else:
+        ours.set_result(theirs.result())
 
 
 def _done(function, *args) -> Future:
