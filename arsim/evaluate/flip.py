@@ -85,8 +85,10 @@ def masked_flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> fl
 def _passive_openmp() -> None:
     """flip_evaluator's OpenMP threads sleep between its loops instead of spinning: beside a caller that
     renders on the same cores, a spinning thread takes a core's time from it (a third of FLIP's CPU time
-    went to spinning in an AR session). Set before flip_evaluator is first imported, when OpenMP reads it."""
+    went to spinning in an AR session). Set before flip_evaluator is first imported, when OpenMP reads it (the
+    spin count as well: arsim's own, for numba's loops, would override the policy's)."""
     os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
+    os.environ["GOMP_SPINCOUNT"] = "0"
 
 
 class FlipWorker:
