@@ -39,40 +39,14 @@ SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SUB_FILTER = 1
 
 
-@numba.njit(cache=True, nogil=True)
-def _sub_filtered(flat: np.ndarray, row_step: int, pixel_step: int, channels: int, out: np.ndarray) -> None:
-    """PNG scanlines (H, 1 + W C) of an image whose channel c of pixel (y, x) is the byte
-    flat[y row_step + x pixel_step + c]: a filter byte, then each byte minus the same channel of the
-    pixel before (modulo 256)."""
-    height, width = out.shape[0], (out.shape[1] - 1) // channels
-    for y in range(height):
-        r = y * row_step
-        out[y, 0] = SUB_FILTER
-        for c in range(channels):
-            out[y, 1 + c] = flat[r + c]
-        if channels == 3:  # the camera frames: written out so that the loop vectorises
-            for x in range(1, width):
-                i, j = r + x * pixel_step, 1 + 3 * x
-                out[y, j] = flat[i] - flat[i - pixel_step]
-                out[y, j + 1] = flat[i + 1] - flat[i + 1 - pixel_step]
-                out[y, j + 2] = flat[i + 2] - flat[i + 2 - pixel_step]
-        else:
-            for x in range(1, width):
-                for c in range(channels):
-                    i = r + x * pixel_step + c
-                    out[y, 1 + x * channels + c] = flat[i] - flat[i - pixel_step]
-
-
-def _bytes_of(image: np.ndarray) -> tuple[np.ndarray, int, int]:
-    """The image's memory as a flat byte array from its first byte, with its row and pixel steps; a
-    view where the channels of a pixel are adjacent (the RGB of an RGBA read-back), else a copy."""
+def _sub_filtered(image: np.ndarray, out: np.ndarray) -> None:
+    """PNG scanlines (H, 1 + W C) of an 8-bit image (H, W, C), any strides: a filter byte, then each byte minus
+    the same channel of the pixel before (modulo 256). One NumPy subtraction (0.06 ms a 640 x 480 frame,
+    against 0.55 for a compiled loop over a strided view)."""
     height, width, channels = image.shape
-    row_step, pixel_step, channel_step = image.strides
-    if channel_step != 1 or pixel_step < channels or row_step < 0:
-        image = np.ascontiguousarray(image)
-        row_step, pixel_step = image.strides[:2]
-    size = (height - 1) * row_step + (width - 1) * pixel_step + channels
-    return np.lib.stride_tricks.as_strided(image, shape=(size,), strides=(1,), writeable=False), row_step, pixel_step
+    out[:, 0] = SUB_FILTER
+    out[:, 1:1 + channels] = image[:, 0]
+    np.subtract(image[:, 1:], image[:, :-1], out=out[:, 1 + channels:].reshape(height, width - 1, channels))
 
 
 def _chunk(kind: bytes, data) -> list:
@@ -90,7 +64,7 @@ def png_bytes(image: np.ndarray, level: int = 1) -> bytes:
     height, width, channels = image.shape
     colour_type = {1: 0, 3: 2, 4: 6}[channels]
     filtered = np.empty((height, width * channels + 1), dtype=np.uint8)
-    _sub_filtered(*_bytes_of(image), channels, filtered)
+    _sub_filtered(image, filtered)
     header = struct.pack(">IIBBBBB", width, height, 8, colour_type, 0, 0, 0)
     parts = [SIGNATURE, *_chunk(b"IHDR", header), *_chunk(b"IDAT", isal_zlib.compress(filtered, level)),
              *_chunk(b"IEND", b"")]
