@@ -81,12 +81,12 @@ def measured_capture(rec: Recording, settings: CaptureSettings, out: Path, stage
     """The capture of a recording's sweep, measured against the truth as far as the recording has one, written
     into out (env.exr, metrics.json, plots, TUM trajectories); returns the result and its metrics."""
     scenario = recording_scenario(rec)  # the sensors as recorded
-    with stage(description) as update:
+    with stage(description) as update:  # (its files and plots part of the stage: 1.5 s of a default capture's)
         result = capture(rec, settings, progress=lambda f, c: update(
             completed=f, description=f"{description}: {100 * c:.1f} % covered"))
-    truth = true_probe(rec, settings.size)
-    error = response_error(result.response, true_response(scenario)) if truth is not None else None
-    return result, write_capture(result, truth, error, out, rec.meta["camera"]["fps"], truth_absent(rec))
+        truth = true_probe(rec, settings.size)
+        error = response_error(result.response, true_response(scenario)) if truth is not None else None
+        return result, write_capture(result, truth, error, out, rec.meta["camera"]["fps"], truth_absent(rec))
 
 
 def captured_sweep(scenario: Scenario, out: Path, size: int | None = None, align_every: int | None = None,
