@@ -604,12 +604,13 @@ def _run_stages(scenario: Scenario, source: str, out: Path, recording: Path | No
         lit_as["key"] = lit_maps_key(keys["estimates"], needed, r.map_size)
         lit_hit = cache.lookup("lit_maps", lit_as["key"])
         lit_as["status"] = "reused" if lit_hit is not None else "computed"
-        profiled = []
+        profiled = None
 
         def write_session_profile(records):  # (while the FLIP worker finishes the scores)
+            nonlocal profiled
+            profiled = ProfileRun("AR session", r.method, scenario.profile.budget_ms, records)
             (out / "profile").mkdir(exist_ok=True)
-            profiled.append(ProfileRun("AR session", r.method, scenario.profile.budget_ms, records))
-            write_profile(profiled, out / "profile")
+            write_profile([profiled], out / "profile")
 
         with step("session", description) as update, flip_worker() as flip:
             if lit_hit is not None:
@@ -628,7 +629,7 @@ def _run_stages(scenario: Scenario, source: str, out: Path, recording: Path | No
                 cache.store("tracking", tracked_as["key"], out, [], lambda folder: _save_tracked(session.tracked(), folder))
             write_estimate_frames(session.estimate_frames, out / "estimates" / "frames")
             tracking, figures = session_metrics(ar, session)
-            figures |= {"budget_ms": profiled[0].budget_ms, "within_budget_pct": profiled[0].summary()["within_budget_pct"]}
+            figures |= {"budget_ms": profiled.budget_ms, "within_budget_pct": profiled.summary()["within_budget_pct"]}
             if truth is not None and lit_by_truth(maps, baked["truth_maps"]):
                 figures["lit_by_truth"] = True  # (the FLIP is 0 by construction: the report says so)
         return {"frames": np.asarray(session.frames), "figures": figures, "estimate_scores": session.estimate_scores,
