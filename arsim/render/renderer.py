@@ -8,7 +8,7 @@ so that the rectangle's corner lands on the tile's. Clearing the tile, the tone 
 tone mapping then cost what the objects cover, not what the frame does (on llvmpipe, a 1280 x 720
 RGBA16F clear and mip chain take 5 ms; a fullscreen pass 2 ms): each runs on the objects' own
 rectangles (merge_rects). The average is summed in blocks into a target AVERAGE_BLOCK times smaller on
-each side, whose texels over the blocks' box one fragment then sums into a 1 x 1 total (average_sum.frag).
+each side, whose texels over the blocks' box the tone mapper's vertex shader sums (average_sum.glsl).
 
 Images come back with row 0 at the top (OpenCV's convention); GL's framebuffer rows are bottom-up.
 """
@@ -61,6 +61,8 @@ def _place(program, model: np.ndarray) -> None:
 def _source(name: str, defines: list[str]) -> str:
     header = "#version 430\n" + "".join(f"#define {d}\n" for d in defines)
     shared = core_shader("anglemap.glsl") if name.endswith(".frag") else ""
+    if name in ("rects.vert", "average_sum.frag"):
+        shared += _shader("average_sum.glsl")
     if name.endswith(".frag") and "INM" in defines:
         shared += _bases_glsl()
     return header + shared + _shader(name)
@@ -194,7 +196,7 @@ class _Drawable:
 
 
 # The tone mapper's average is summed in blocks of this many pixels a side, over the objects' rectangles
-# only, into a target this many times smaller on each side than the tile, whose texels one fragment sums:
+# only, into a target this many times smaller on each side than the tile, whose texels the tone mapper sums:
 # on llvmpipe the RGBA16F mip chain of a whole tile took 3 ms a frame (median; 13 at worst), the tile
 # mostly the space between the objects; the blocks and a mip chain of their target took 0.5-1 ms (8
 # measured a little faster than 4), the chain alone 0.5-0.7 ms whatever its size (a blit per level), and
@@ -206,7 +208,7 @@ AVERAGE_BLOCK = 8
 class _Tile:
     """The render targets of one tile size: HDR colour (its alpha the mask: 1 where an object was drawn),
     depth, and with debug the shading vectors; and the tone mapper's average target (a texel per
-    AVERAGE_BLOCK² pixels: the block's mean luminance or log, its coverage)."""
+    AVERAGE_BLOCK² pixels: the block's mean luminance or log, its coverage) and the blocks' box in it."""
 
     hdr: object
     fbo: object
@@ -214,9 +216,8 @@ class _Tile:
     zeros: bytes  # an HDR tile of zeros
     average: object
     average_fbo: object
-    total: object  # 1 x 1: the average target's sums (average_sum.frag), what the tone mapper reads
-    total_fbo: object
     debug: list = field(default_factory=list)
+    box: tuple = (0, 0, 0, 0)  # x0, y0, x1, y1 (exclusive): the last average pass's blocks, in the target's texels
     dirty: list = field(default_factory=list)  # the rectangles (x, y, w, h) written since the tile was zeroed
 
     def clear(self, rects: list[tuple[int, int, int, int]]) -> None:
@@ -664,9 +665,8 @@ class Renderer:
             fbo = self.ctx.framebuffer([hdr, *debug], depth)
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)  # (a new texture's content is undefined)
             average = self.ctx.texture((size[0] // AVERAGE_BLOCK, size[1] // AVERAGE_BLOCK), 2, dtype="f4")
-            total = self.ctx.texture((1, 1), 2, dtype="f4")
             self.tiles[size] = _Tile(hdr, fbo, self.ctx.framebuffer(debug, depth), bytes(size[0] * size[1] * 8),
-                                     average, self.ctx.framebuffer([average]), total, self.ctx.framebuffer([total]), debug)
+                                     average, self.ctx.framebuffer([average]), debug)
         return self.tiles[size]
 
     def no_objects(self) -> None:
@@ -727,13 +727,6 @@ class Renderer:
             self.tonemappers[log_average] = (average, program)
         return self.tonemappers[log_average]
 
-    def _summer(self):
-        """The program that sums the average target's blocks into the tile's 1 x 1 total (average_sum.frag)."""
-        if self._sum_program is None:
-            self._sum_program = self.ctx.program(vertex_shader=_source("blocks.vert", []),
-                                                 fragment_shader=_source("average_sum.frag", []))
-        return self._sum_program
-
     def _draw_rects(self, program, rects: np.ndarray) -> None:
         """Two triangles per rectangle (x0, y0, x1, y1) with the program, into the framebuffer in use. The
         corners go into a buffer kept per program (grown when a frame has more rectangles), not one made
@@ -751,9 +744,8 @@ class Renderer:
         vao.render(vertices=6 * len(rects))
 
     def _average_pass(self, program) -> None:
-        """The masked pixels' average into the tile's total: the blocks that hold the objects' rectangles
-        summed into the average target (zeros elsewhere), then the target's texels over the blocks' box
-        summed into the 1 x 1 total (average_sum.frag)."""
+        """The blocks that hold the objects' rectangles summed into the tile's average target (zeros
+        elsewhere), and the blocks' box kept: what the tone mapper sums (average_sum.glsl)."""
         tile, b = self.tile, AVERAGE_BLOCK
         # (zeros uploaded: llvmpipe's clear of the target took ten times as long in the frame)
         tile.average.write(memoryview(tile.zeros)[:tile.average.width * tile.average.height * 8])
@@ -765,15 +757,9 @@ class Renderer:
         program["hdr"].value = 0
         program["target_size"].value = tile.average.size
         self._draw_rects(program, blocks)
-        summer = self._summer()
-        tile.total_fbo.use()
-        tile.average.use(0)
-        summer["blocks"].value = 0
         width, height = tile.average.size
-        summer["box"].value = (max(int(blocks[:, 0].min()), 0), max(int(blocks[:, 1].min()), 0),
-                               min(int(blocks[:, 2].max()), width), min(int(blocks[:, 3].max()), height))
-        summer["target_size"].value = (1, 1)
-        self._draw_rects(summer, np.array([(0, 0, 1, 1)]))
+        tile.box = (max(int(blocks[:, 0].min()), 0), max(int(blocks[:, 1].min()), 0),
+                    min(int(blocks[:, 2].max()), width), min(int(blocks[:, 3].max()), height))
 
     def tonemap(self, background: np.ndarray, key: float = 0.18, white: float = 2.0, log_average: bool = False) -> np.ndarray:
         """Steps 4 and 6: the camera frame (H, W, 3) uint8 with Reinhard's operator on the masked pixels
@@ -793,9 +779,10 @@ class Renderer:
             return
         average, program = self._tonemapper(log_average)
         self._average_pass(average)
-        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("average", self.tile.total)]):
+        for unit, (name, tex) in enumerate([("hdr", self.tile.hdr), ("blocks", self.tile.average)]):
             tex.use(unit)
             program[name].value = unit
+        program["box"].value = self.tile.box
         program["key"].value, program["white"].value = key, white
         program["origin"].value = self.rect[:2]
         program["frame_size"].value = (self.camera.width, self.camera.height)
@@ -893,8 +880,20 @@ class Renderer:
         return tuple(self._read(t, 4, "f4") for t in self.tile.debug)
 
     def mip_average(self, log_average: bool = False) -> float:
-        """The average luminance of the masked pixels as the tone mapper reads it from the tile's total
-        (after a tonemap pass with the same log_average)."""
-        value, coverage = np.frombuffer(self.tile.total.read(), np.float32)
+        """The average luminance of the masked pixels as the tone mapper sums it (after a tonemap pass with
+        the same log_average): the same sums of the same blocks (average_sum.glsl), drawn into a 1 x 1 target
+        and read back."""
+        if self._sum_program is None:
+            program = self.ctx.program(vertex_shader=_source("blocks.vert", []), fragment_shader=_source("average_sum.frag", []))
+            total = self.ctx.texture((1, 1), 2, dtype="f4")
+            self._sum_program = (program, total, self.ctx.framebuffer([total]))
+        program, total, fbo = self._sum_program
+        fbo.use()
+        self.tile.average.use(0)
+        program["blocks"].value = 0
+        program["box"].value = self.tile.box
+        program["target_size"].value = (1, 1)
+        self._draw_rects(program, np.array([(0, 0, 1, 1)]))
+        value, coverage = np.frombuffer(total.read(), np.float32)
         mean = value / max(coverage, 1e-12)
         return float(np.exp(mean) if log_average else mean)
