@@ -40,9 +40,6 @@ MAX_PAIRS = 6  # per keyframe, the nearest in angle taken close in time, and as 
 LOOP_S = 3.0  # keyframes taken further apart than this in time are loop-closure candidates
 MIN_PAIR_INLIERS = 12  # a loop closure needs this many agreeing matches
 PAIR_FLOOR_DEG = 0.05  # added on every axis: a pair's rotation is known no better (measured: 0.05-0.08 degrees median error)
-# Direct alignments run on this many threads: OpenCV's blurs and remaps let go of the GIL, and each pair's
-# alignment is deterministic and independent of the others (no random draws), so the order does not matter.
-DIRECT_WORKERS = min(2, os.cpu_count() or 1)
 PROGRESS_S = 0.5  # how often the keyframes' features report their progress
 # The refinement's progress, by phase: the share of its time each took on the default sweep (keyframe features,
 # the calibration's pairs, then each round's pairs and solve)
@@ -532,13 +529,14 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         reached = {c[0] for c in out} | {c[1] for c in out}
         unreached = [(i, j) for i, j in sorted(pairs) if i not in reached or j not in reached]
         todo = [p for p in unreached if p not in aligned]
-        with ThreadPoolExecutor(DIRECT_WORKERS) as pool:
-            for n, (p, match) in enumerate(zip(todo, pool.map(lambda p: align_direct(
-                    keyframes[p[0]].image, keyframes[p[1]].image, direct, gated[p][0]), todo))):
-                aligned[p] = None if match is None else (
-                    match.rotation, match.covariance + isotropic(np.radians(PAIR_FLOOR_DEG)))
-                if n % 10 == 0:
-                    report(0.5 + 0.5 * n / len(todo))
+        # One after the other, on this thread: SciPy's least-squares loop holds the GIL most of the time, and on two
+        # threads the alignments took longer (the outdoor sweep's 643: refinement 15.1-18.1 s against 13.3-14.5 s).
+        for n, p in enumerate(todo):
+            match = align_direct(keyframes[p[0]].image, keyframes[p[1]].image, direct, gated[p][0])
+            aligned[p] = None if match is None else (
+                match.rotation, match.covariance + isotropic(np.radians(PAIR_FLOOR_DEG)))
+            if n % 10 == 0:
+                report(0.5 + 0.5 * n / len(todo))
         report(1.0)
         for i, j in unreached:
             q, radius = gated[(i, j)]
