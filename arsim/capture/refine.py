@@ -530,7 +530,8 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         unreached = [(i, j) for i, j in sorted(pairs) if i not in reached or j not in reached]
         todo = [p for p in unreached if p not in aligned]
         # One after the other, on this thread: SciPy's least-squares loop holds the GIL most of the time, and on two
-        # threads the alignments took longer (the outdoor sweep's 643: refinement 15.1-18.1 s against 13.3-14.5 s).
+        # threads the alignments took longer (outdoor_sun's 643: refinement 13.6-18.1 s against 12.5-14.5 s, five
+        # runs each).
         for n, p in enumerate(todo):
             match = align_direct(keyframes[p[0]].image, keyframes[p[1]].image, direct, gated[p][0])
             aligned[p] = None if match is None else (
