@@ -65,3 +65,26 @@ def test_views_that_do_not_overlap_are_not_aligned():
     images = DirectImages(features.camera, CAMERA, linear, falloff)
     a, b = (images(features.small(f)) for f in frames)
     assert align_direct(a, b, images, truth * Rotation.from_euler("Y", 50, degrees=True)) is None
+
+
+def test_shares_aligned_in_the_worker_process_give_the_same_matches_to_the_bit():
+    """The refinement's shares of alignments (align_direct_all) computed in the worker process and by the caller's
+    settle: each match the same as align_direct's here, rotation and covariance bit for bit."""
+    from arsim.capture.direct import align_direct_all
+    from arsim.core.worker import side_worker
+
+    frames, truth, linear, falloff = _ceiling_views()
+    features = KeyframeFeatures(CAMERA)
+    images = DirectImages(features.camera, CAMERA, linear, falloff)
+    a, b = (images(features.small(f)) for f in frames)
+    starts = [truth * Rotation.from_rotvec(np.radians(s)) for s in ([0.5, -0.4, 0.3], [-0.8, 0.2, -0.6], [0.2, 0.9, 0.1])]
+    jobs = [(a, b, start) for start in starts] + [(a, b, truth * Rotation.from_euler("Y", 50, degrees=True))]
+    here = [align_direct(*job[:2], images, job[2]) for job in jobs]
+    with side_worker() as side:
+        futures = [side.call(align_direct_all, images, jobs[k:k + 1]) for k in range(len(jobs))]
+        side.settle()
+        there = [match for f in futures for match in f.result()]
+    assert here[-1] is None and there[-1] is None
+    for mine, theirs in zip(here[:-1], there[:-1]):
+        assert np.array_equal(mine.rotation.as_quat(), theirs.rotation.as_quat())
+        assert np.array_equal(mine.covariance, theirs.covariance)

@@ -89,3 +89,29 @@ def test_settle_takes_the_calls_not_yet_begun_from_the_back_with_the_workers_val
         flip.settle()
         assert flip.taken > 0  # (the worker is handed two at a time: the rest wait to be taken)
         assert [f.result() for f in futures] == [expected] * 16
+
+
+def test_a_call_the_worker_process_could_not_run_is_computed_by_the_caller():
+    """A worker that died or never started (a script that starts it at import without the __main__ guard, run
+    again by the spawned process) breaks its pool: the calls it held are computed by the caller instead."""
+    from concurrent.futures import Future
+    from concurrent.futures.process import BrokenProcessPool
+
+    from arsim.core.worker import SideWorker
+
+    pending = []
+
+    def submit(function, *args):
+        pending.append(Future())
+        return pending[-1]
+
+    def broken(function, *args):
+        raise BrokenProcessPool("the worker died")
+
+    worker = SideWorker(submit)
+    futures = [worker.call(sum, [1, 2, k]) for k in range(3)]
+    for future in pending:  # the pool's manager marks every call it held broken
+        future.set_running_or_notify_cancel()
+        future.set_exception(BrokenProcessPool("the worker died"))
+    assert [f.result(timeout=5) for f in futures] == [3, 4, 5]
+    assert SideWorker(broken).call(sum, [2, 3]).result(timeout=5) == 5  # (submitted to a pool already broken)

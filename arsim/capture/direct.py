@@ -183,3 +183,9 @@ def align_direct(a: DirectImage, b: DirectImage, images: DirectImages, expected:
     variances = np.minimum(sigma**2 * footprint / np.maximum(values_info, 1e-12), 1.0)
     covariance = (axes * variances) @ axes.T
     return DirectMatch(q, covariance, correlation, float(overlap))
+
+
+def align_direct_all(images: DirectImages, jobs: list[tuple[DirectImage, DirectImage, Rotation]]) -> list[DirectMatch | None]:
+    """align_direct of each (a, b, expected) in jobs, in order: a share of a refinement's alignments, as one
+    call to a worker process (the images of the share travel once, those shared by pairs once)."""
+    return [align_direct(a, b, images, expected) for a, b, expected in jobs]

@@ -27,8 +27,9 @@ from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation, Slerp
 
 from arsim.capture.align import MIN_INLIERS, robust_rotation, scaled_camera, sift_detector
-from arsim.capture.direct import DirectImage, DirectImages, align_direct
+from arsim.capture.direct import DirectImage, DirectImages, align_direct_all
 from arsim.core.conventions import CameraIntrinsics
+from arsim.core.worker import SideWorker, side_worker
 
 KEY_DEG = 5.0  # a metered frame becomes a keyframe once the view has turned this far from the last one
 KEY_SCALE = 0.5  # features at this fraction of the frame size (a quarter, as the online aligner: pairs' median error
@@ -41,6 +42,11 @@ LOOP_S = 3.0  # keyframes taken further apart than this in time are loop-closure
 MIN_PAIR_INLIERS = 12  # a loop closure needs this many agreeing matches
 PAIR_FLOOR_DEG = 0.05  # added on every axis: a pair's rotation is known no better (measured: 0.05-0.08 degrees median error)
 PROGRESS_S = 0.5  # how often the keyframes' features report their progress
+# The direct alignments, GIL-bound (SciPy's least-squares loop), run in shares split between this process and a
+# worker process (arsim.core.worker), started with the refinement where it has this many keyframes (a sweep's
+# worth: the default sweep has 299): fewer hold too few alignments to pay for starting a process.
+SIDE_KEYFRAMES = 100
+DIRECT_SHARE = 8  # alignments per share (about 0.1 s of work: the two processes end within one share of each other)
 # The refinement's progress, by phase: the share of its time each took on the default sweep (keyframe features,
 # the calibration's pairs, then each round's pairs and solve)
 PHASE_SHARES = (0.3, 0.2, 0.35, 0.15)  # (2 + ROUNDS of them)
@@ -498,6 +504,14 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         return lambda fraction: progress(min(low + PHASE_SHARES[k] * fraction, 1.0))
 
     keys = select_keyframes(metered, imu, times)
+    # (the worker imports while the keyframes' features are found)
+    with side_worker(enabled=direct is not None and len(keys) >= SIDE_KEYFRAMES) as side:
+        return _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream, direct, phase, side, began)
+
+
+def _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream, direct, phase, side: SideWorker,
+            began: float) -> Refinement:
+    """refine's work from its keyframes on, the direct alignments shared with `side`."""
     key_t = times[keys]
     # (frames(k) may give the frame at KeyframeFeatures.small's size already)
     keyframes = keyframe_features(camera, direct, keys, frames, phase(0))
@@ -529,15 +543,17 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         reached = {c[0] for c in out} | {c[1] for c in out}
         unreached = [(i, j) for i, j in sorted(pairs) if i not in reached or j not in reached]
         todo = [p for p in unreached if p not in aligned]
-        # One after the other, on this thread: SciPy's least-squares loop holds the GIL most of the time, and on two
-        # threads the alignments took longer (outdoor_sun's 643: refinement 13.6-18.1 s against 12.5-14.5 s, five
-        # runs each).
-        for n, p in enumerate(todo):
-            match = align_direct(keyframes[p[0]].image, keyframes[p[1]].image, direct, gated[p][0])
-            aligned[p] = None if match is None else (
-                match.rotation, match.covariance + isotropic(np.radians(PAIR_FLOOR_DEG)))
-            if n % 10 == 0:
-                report(0.5 + 0.5 * n / len(todo))
+        # In shares, split between this process and the worker: SciPy's least-squares loop holds the GIL most of
+        # the time, so threads did not overlap them (outdoor_sun's 643: refinement 13.6-18.1 s on two threads against
+        # 12.5-14.5 s one after the other, five runs each); a process does. Each is a function of its pair alone.
+        shares = [todo[k:k + DIRECT_SHARE] for k in range(0, len(todo), DIRECT_SHARE)]
+        futures = [side.call(align_direct_all, direct, [(keyframes[i].image, keyframes[j].image, gated[(i, j)][0])
+                                                        for i, j in share]) for share in shares]
+        side.settle(lambda: report(0.5 + 0.5 * sum(f.done() for f in futures) / len(futures)))
+        for share, future in zip(shares, futures):
+            for p, match in zip(share, future.result()):
+                aligned[p] = None if match is None else (
+                    match.rotation, match.covariance + isotropic(np.radians(PAIR_FLOOR_DEG)))
         report(1.0)
         for i, j in unreached:
             q, radius = gated[(i, j)]

@@ -6,16 +6,14 @@ worker imports little more than NumPy.
 
 from __future__ import annotations
 
-import collections
 import contextlib
-import functools
-import multiprocessing
 import os
-import sys
-from collections.abc import Callable, Iterator
-from concurrent.futures import Future, ProcessPoolExecutor
+from collections.abc import Callable
+from concurrent.futures import Future
 
 import numpy as np
+
+from arsim.core.worker import SideWorker, side_worker
 
 # How far FLIP's filters reach at its default 67 pixels per degree: the colour pipeline's widest CSF Gaussian
 # (b = 0.04 deg²) has radius ceil(3 sqrt(0.04 / (2 pi²)) 67) = 10 pixels, the feature detectors' ceil(3 x 0.5 x
@@ -91,83 +89,25 @@ def _passive_openmp() -> None:
     os.environ["GOMP_SPINCOUNT"] = "0"
 
 
-class FlipWorker:
-    """masked_flip and flip_map run beside the caller: each call returns a Future of the value they give
-    (flip_worker makes one). settle lets the caller take a share of the calls still waiting."""
+class FlipWorker(SideWorker):
+    """masked_flip and flip_map run beside the caller (arsim.core.worker): each call returns a Future of the
+    value they give (flip_worker makes one); settle lets the caller take a share of the calls still waiting."""
 
     def __init__(self, submit: Callable[..., Future]):
-        self._submit = submit
-        self._waiting = collections.deque()  # (ours, the worker's, function, args) of the calls not yet done
-        self.taken = 0  # calls settle computed here
-
-    def _call(self, function: Callable, *args) -> Future:
-        theirs = self._submit(function, *args)
-        if theirs.done():  # (computed in turn: _done)
-            return theirs
-        ours = Future()
-        theirs.add_done_callback(functools.partial(_copy_outcome, ours))
-        while self._waiting and self._waiting[0][1].done():  # (the worker takes them in order)
-            self._waiting.popleft()
-        self._waiting.append((ours, theirs, function, args))
-        return ours
+        super().__init__(submit, _passive_openmp)  # (settling here: as in the worker, where OpenMP has not started)
 
     def score(self, reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> Future:
         """masked_flip's value; only the mask's box travels (the box of the box is the box itself, so the
         value is masked_flip's exactly). The AR session's scorer."""
         box = flip_box(mask, FLIP_RADIUS)
-        return self._call(masked_flip, reference[box], test[box], mask[box])
+        return self.call(masked_flip, reference[box], test[box], mask[box])
 
     def error_map(self, a: np.ndarray, b: np.ndarray, where: np.ndarray) -> Future:
         """flip_map's (H, W) map with its default margin."""
-        return self._call(flip_map, a, b, where)
-
-    def settle(self) -> None:
-        """The calls the worker has not begun, computed here from the last while it works from the first,
-        until it has begun them all: the caller, done with its own work, halves the worker's backlog instead
-        of waiting for all of it. The values are the worker's (the same function of the same arguments)."""
-        _passive_openmp()  # (as in the worker: where this process has not started OpenMP yet)
-        while self._waiting:
-            ours, theirs, function, args = self._waiting.pop()
-            # (ours running first: the worker's cancellation then leaves it to be computed here)
-            if theirs.done() or not ours.set_running_or_notify_cancel():
-                continue
-            if theirs.cancel():  # (not begun: it never will be)
-                self.taken += 1
-                try:
-                    ours.set_result(function(*args))
-                except Exception as e:
-                    ours.set_exception(e)
+        return self.call(flip_map, a, b, where)
 
 
-def _copy_outcome(ours: Future, theirs: Future) -> None:
-    """The worker's outcome given to the caller's future: cancelled with it (the worker stopped), except where
-    settle took the call (then running, it cannot be cancelled, and settle gives its value)."""
-    if theirs.cancelled():
-        ours.cancel()
-    elif (error := theirs.exception()) is not None:
-        ours.set_exception(error)
-    else:
-        ours.set_result(theirs.result())
-
-
-def _done(function, *args) -> Future:
-    done = Future()
-    done.set_result(function(*args))
-    return done
-
-
-@contextlib.contextmanager
-def flip_worker() -> Iterator[FlipWorker]:
+def flip_worker() -> contextlib.AbstractContextManager[FlipWorker]:
     """A FlipWorker whose FLIP runs in a worker process: flip_evaluator holds the GIL while it works, so a
     thread would not overlap it with the caller's rendering; a process does, on another core."""
-    main_file = getattr(sys.modules["__main__"], "__file__", None)
-    if main_file is not None and not os.path.isfile(main_file):  # (a script read from stdin: a spawned worker
-        yield FlipWorker(_done)  # cannot import it; computed in turn)
-        return
-    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_passive_openmp)
-    try:
-        yield FlipWorker(pool.submit)
-    except BaseException:  # (interrupted: the FLIP not yet begun is dropped, not waited for)
-        pool.shutdown(wait=True, cancel_futures=True)
-        raise
-    pool.shutdown(wait=True)
+    return side_worker(FlipWorker, initializer=_passive_openmp)
