@@ -123,3 +123,38 @@ def test_guided_matches_equal_those_of_the_full_distance_matrix(radius_deg):
         assert len(ia) > 0
         np.testing.assert_array_equal(got[0], ia)
         np.testing.assert_array_equal(got[1], nearest_b[ia])
+
+
+def test_pairs_matched_in_shares_in_the_worker_process_match_as_one_after_the_other():
+    """The refinement's guided matching in shares in the worker process (the features sent once, SIFT's whole
+    numbers as uint8), each pair's RANSAC then here on the shared random stream: the same rotations, covariances
+    and inlier counts as match_pair one after the other; a keyframe without features enough gives None."""
+    from arsim.capture.refine import _compact, drop_features, guided_all, keep_features
+    from arsim.core.worker import side_worker
+
+    rng = np.random.default_rng(5)
+    truth = Rotation.from_rotvec([0.02, -0.05, 0.01])
+    keyframes = []
+    for k in range(4):
+        n = 150 if k < 3 else 5  # (the last: too few features)
+        bearings = Rotation.random(n, random_state=rng).apply([0.0, 0.0, 1.0])
+        bearings = np.where(bearings[:, 2:] < 0, -bearings, bearings)
+        keyframes.append(Keyframe(k, bearings, rng.integers(0, 200, (n, 128)).astype(np.float32)))
+    # keyframe 1 sees keyframe 0's features turned by the truth, with its descriptors: true matches among noise
+    keyframes[1] = Keyframe(1, truth.inv().apply(keyframes[0].bearings), keyframes[0].descriptors.copy())
+    jobs = [(0, 1, truth, np.radians(1.0)), (0, 2, truth, np.radians(5.0)), (1, 3, truth, np.radians(5.0))]
+    one_by_one = [match_pair(keyframes[i], keyframes[j], np.random.default_rng(0), q, r) for i, j, q, r in jobs]
+    assert one_by_one[0] is not None and one_by_one[2] is None
+    with side_worker() as side:
+        side.call(keep_features, 7, [k.bearings for k in keyframes], [_compact(k.descriptors) for k in keyframes])
+        shares = [side.call(guided_all, 7, jobs[:2]), side.call(guided_all, 7, jobs[2:])]
+        found = [m for share in shares for m in share.result()]
+    drop_features(7)
+    assert found[2] is None and _compact(keyframes[0].descriptors).dtype == np.uint8
+    for (i, j, q, r), matches, expected in zip(jobs[:2], found, one_by_one):
+        got = match_pair(keyframes[i], keyframes[j], np.random.default_rng(0), q, r, matches)
+        if expected is None:
+            assert got is None
+        else:
+            assert np.array_equal(got[0].as_quat(), expected[0].as_quat()) and np.array_equal(got[1], expected[1])
+            assert got[2] == expected[2]

@@ -14,6 +14,7 @@ correction times the IMU's orientation of the frame.
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections.abc import Callable
@@ -42,11 +43,12 @@ LOOP_S = 3.0  # keyframes taken further apart than this in time are loop-closure
 MIN_PAIR_INLIERS = 12  # a loop closure needs this many agreeing matches
 PAIR_FLOOR_DEG = 0.05  # added on every axis: a pair's rotation is known no better (measured: 0.05-0.08 degrees median error)
 PROGRESS_S = 0.5  # how often the keyframes' features report their progress
-# The direct alignments, GIL-bound (SciPy's least-squares loop), run in shares split between this process and a
-# worker process (arsim.core.worker), started with the refinement where it has this many keyframes (a sweep's
-# worth: the default sweep has 299): fewer hold too few alignments to pay for starting a process.
+# A worker process (arsim.core.worker) takes the pairs' guided matching ahead of this thread's RANSAC, and half
+# the direct alignments, GIL-bound (SciPy's least-squares loop); started with the refinement where it has this many
+# keyframes (a sweep's worth: the default sweep has 299): fewer hold too little work to pay for starting a process.
 SIDE_KEYFRAMES = 100
 DIRECT_SHARE = 8  # alignments per share (about 0.1 s of work: the two processes end within one share of each other)
+MATCH_SHARE = 32  # pairs per share of guided matching (about 25 ms of work)
 # The refinement's progress, by phase: the share of its time each took on the default sweep (keyframe features,
 # the calibration's pairs, then each round's pairs and solve)
 PHASE_SHARES = (0.3, 0.2, 0.35, 0.15)  # (2 + ROUNDS of them)
@@ -259,8 +261,51 @@ def guided_matches(a: Keyframe, b: Keyframe, expected: Rotation, radius: float) 
     return ia, nearest_b[ia]
 
 
+def _matchable(a: Keyframe, b: Keyframe) -> bool:
+    """Both keyframes have features enough to be matched."""
+    return not (a.descriptors is None or b.descriptors is None or len(a.bearings) < MIN_INLIERS
+                or len(b.bearings) < MIN_INLIERS)
+
+
+# The keyframes' features a worker process matches pairs of (guided_all), by token: sent to it once per refinement.
+_KEPT: dict[int, list[Keyframe]] = {}
+_TOKENS = itertools.count()
+
+
+def keep_features(token: int, bearings: list[np.ndarray], descriptors: list[np.ndarray | None]) -> None:
+    """The keyframes' features kept in this process under token (descriptors may come as uint8: SIFT's are
+    whole numbers within 0-255, and guided_matches computes with them in float64 either way)."""
+    _KEPT[token] = [Keyframe(-1, b, d) for b, d in zip(bearings, descriptors)]
+
+
+def drop_features(token: int) -> None:
+    _KEPT.pop(token, None)
+
+
+def _compact(descriptors: np.ndarray | None) -> np.ndarray | None:
+    """SIFT's descriptors as uint8 where they are whole numbers within 0-255 (a quarter of the bytes to send), as
+    they are otherwise."""
+    if descriptors is not None and np.array_equal(small := descriptors.astype(np.uint8), descriptors):
+        return small
+    return descriptors
+
+
+def guided_all(token: int, jobs: list[tuple[int, int, Rotation, float]]) -> list[tuple[np.ndarray, np.ndarray] | None]:
+    """guided_matches of each keyframe pair (i, j, expected, radius) of the features kept under token, in order
+    (None where match_pair would not match them): a share of a refinement's pairs for a worker process, while
+    the caller runs each pair's RANSAC, in order, on the random stream they share."""
+    kept = _KEPT[token]
+    return [guided_matches(kept[i], kept[j], expected, radius) if _matchable(kept[i], kept[j]) else None
+            for i, j, expected, radius in jobs]
+
+
+def _warm() -> None:
+    """Nothing: a first call that has the worker process import this module while the caller works."""
+
+
 def match_pair(a: Keyframe, b: Keyframe, rng: np.random.Generator, expected: Rotation | None = None,
-               radius: float = np.pi) -> tuple[Rotation, np.ndarray, int] | None:
+               radius: float = np.pi, matches: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> tuple[Rotation, np.ndarray, int] | None:
     """The relative rotation Q with bearings_a ≈ Q bearings_b (so Q = R_a⁻¹ R_b for camera-to-world R),
     its covariance (3, 3, rad², b's axes) and its inlier count; None without a reliable match. With an
     expected Q, guided, as structure-from-motion pipelines match under a known motion: a feature of b is
@@ -268,12 +313,15 @@ def match_pair(a: Keyframe, b: Keyframe, rng: np.random.Generator, expected: Rot
     bare view most of the features are noise, and matched without the prior they pass RANSAC in small
     clusters that pin the rotation poorly (with the covariance below: the dim studio's refined orientation
     1.31 -> 0.11 degrees RMS; Lowe's ratio test instead of the mutual check lost the ceiling's few true
-    matches: 20 s drifting sweep 0.18 -> 0.26)."""
-    if a.descriptors is None or b.descriptors is None or len(a.bearings) < MIN_INLIERS or len(b.bearings) < MIN_INLIERS:
+    matches: 20 s drifting sweep 0.18 -> 0.26). matches: guided_matches(a, b, expected, radius) where already
+    found (guided_all)."""
+    if not _matchable(a, b):
         return None
-    if expected is None:
-        matches = cv2.BFMatcher(cv2.NORM_L2, crossCheck=True).match(a.descriptors, b.descriptors)
-        ia, ib = [m.queryIdx for m in matches], [m.trainIdx for m in matches]
+    if matches is not None:
+        ia, ib = matches
+    elif expected is None:
+        found = cv2.BFMatcher(cv2.NORM_L2, crossCheck=True).match(a.descriptors, b.descriptors)
+        ia, ib = [m.queryIdx for m in found], [m.trainIdx for m in found]
     else:
         ia, ib = guided_matches(a, b, expected, radius)
     if len(ia) < MIN_PAIR_INLIERS:
@@ -504,17 +552,25 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         return lambda fraction: progress(min(low + PHASE_SHARES[k] * fraction, 1.0))
 
     keys = select_keyframes(metered, imu, times)
-    # (the worker imports while the keyframes' features are found)
-    with side_worker(enabled=direct is not None and len(keys) >= SIDE_KEYFRAMES) as side:
-        return _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream, direct, phase, side, began)
+    token = next(_TOKENS)
+    with side_worker(enabled=len(keys) >= SIDE_KEYFRAMES) as side:
+        side.call(_warm)  # (the worker starts and imports while the keyframes' features are found)
+        try:
+            return _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream, direct, phase, side,
+                           token, began)
+        finally:
+            drop_features(token)
 
 
 def _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream, direct, phase, side: SideWorker,
-            began: float) -> Refinement:
-    """refine's work from its keyframes on, the direct alignments shared with `side`."""
+            token: int, began: float) -> Refinement:
+    """refine's work from its keyframes on, the guided matching and the direct alignments shared with `side`."""
     key_t = times[keys]
     # (frames(k) may give the frame at KeyframeFeatures.small's size already)
     keyframes = keyframe_features(camera, direct, keys, frames, phase(0))
+    # The features kept here (settle may take a share) and, once, in the worker (SIFT's whole numbers as uint8 there)
+    keep_features(token, [k.bearings for k in keyframes], [k.descriptors for k in keyframes])
+    side.call(keep_features, token, [k.bearings for k in keyframes], [_compact(k.descriptors) for k in keyframes])
     rng = np.random.default_rng(seed)
     matched: dict[tuple[int, int], tuple[Rotation, np.ndarray, int] | None] = {}
     aligned: dict[tuple[int, int], tuple[Rotation, np.ndarray] | None] = {}
@@ -527,14 +583,25 @@ def _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream,
         the matching its first half, the direct alignments the second."""
         out, gated = [], {}  # per pair: the expected relative rotation and the gate's radius
         direct_used.clear()
+        for i, j in sorted(pairs):
+            q = expected[i].inv() * expected[j]
+            gated[(i, j)] = (q, gate(key_t[j] - key_t[i], q.magnitude()))
+        # The new pairs' guided matches in shares in the worker, ahead of this thread, which takes each pair's RANSAC
+        # in order on the random stream the pairs share: the same matches, in the same order, as one after the other.
+        new = [p for p in sorted(pairs) if p not in matched]
+        shares = iter([(share, side.call(guided_all, token, [(i, j, *gated[(i, j)]) for i, j in share]))
+                       for share in (new[k:k + MATCH_SHARE] for k in range(0, len(new), MATCH_SHARE))])
+        guided: dict[tuple[int, int], tuple[np.ndarray, np.ndarray] | None] = {}
         for n, (i, j) in enumerate(sorted(pairs)):
             if n % 50 == 0:
                 report(0.5 * n / len(pairs))
-            q = expected[i].inv() * expected[j]
-            radius = gate(key_t[j] - key_t[i], q.magnitude())
-            gated[(i, j)] = (q, radius)
+            q, radius = gated[(i, j)]
             if (i, j) not in matched:
-                matched[(i, j)] = match_pair(keyframes[i], keyframes[j], rng, q, radius)
+                if (i, j) not in guided:
+                    share, future = next(shares)
+                    guided.update(zip(share, future.result()))
+                found = guided.pop((i, j))
+                matched[(i, j)] = None if found is None else match_pair(keyframes[i], keyframes[j], rng, q, radius, found)
             found = matched[(i, j)]
             if found is not None and (found[0].inv() * q).magnitude() < radius:
                 out.append((i, j, found[0], found[1]))
