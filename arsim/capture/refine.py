@@ -568,7 +568,8 @@ def _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream,
     key_t = times[keys]
     # (frames(k) may give the frame at KeyframeFeatures.small's size already)
     keyframes = keyframe_features(camera, direct, keys, frames, phase(0))
-    # The features kept here (settle may take a share) and, once, in the worker (SIFT's whole numbers as uint8 there)
+    # The features kept here (where the worker is not started, its calls run here) and, once, in the worker (SIFT's
+    # whole numbers as uint8 there)
     keep_features(token, [k.bearings for k in keyframes], [k.descriptors for k in keyframes])
     side.call(keep_features, token, [k.bearings for k in keyframes], [_compact(k.descriptors) for k in keyframes])
     rng = np.random.default_rng(seed)
@@ -600,8 +601,9 @@ def _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream,
                 if (i, j) not in guided:
                     share, future = next(shares)
                     guided.update(zip(share, future.result()))
-                found = guided.pop((i, j))
-                matched[(i, j)] = None if found is None else match_pair(keyframes[i], keyframes[j], rng, q, radius, found)
+                pair_matches = guided.pop((i, j))
+                matched[(i, j)] = None if pair_matches is None else match_pair(keyframes[i], keyframes[j], rng, q, radius,
+                                                                               pair_matches)
             found = matched[(i, j)]
             if found is not None and (found[0].inv() * q).magnitude() < radius:
                 out.append((i, j, found[0], found[1]))
@@ -613,11 +615,11 @@ def _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream,
         # In shares, split between this process and the worker: SciPy's least-squares loop holds the GIL most of
         # the time, so threads did not overlap them (outdoor_sun's 643: refinement 13.6-18.1 s on two threads against
         # 12.5-14.5 s one after the other, five runs each); a process does. Each is a function of its pair alone.
-        shares = [todo[k:k + DIRECT_SHARE] for k in range(0, len(todo), DIRECT_SHARE)]
+        direct_shares = [todo[k:k + DIRECT_SHARE] for k in range(0, len(todo), DIRECT_SHARE)]
         futures = [side.call(align_direct_all, direct, [(keyframes[i].image, keyframes[j].image, gated[(i, j)][0])
-                                                        for i, j in share]) for share in shares]
+                                                        for i, j in share]) for share in direct_shares]
         side.settle(lambda: report(0.5 + 0.5 * sum(f.done() for f in futures) / len(futures)))
-        for share, future in zip(shares, futures):
+        for share, future in zip(direct_shares, futures):
             for p, match in zip(share, future.result()):
                 aligned[p] = None if match is None else (
                     match.rotation, match.covariance + isotropic(np.radians(PAIR_FLOOR_DEG)))
