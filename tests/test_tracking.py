@@ -160,3 +160,35 @@ def test_fused_poses_are_no_worse_and_carry_on_through_a_short_loss_while_truste
     assert fused["extrapolated_rot_err_deg_p95"] <= TRUST_ROTATION_DEG
     assert fused["extrapolated_trans_err_pct_p95"] <= TRUST_POSITION_PCT
     assert fused["frames_lost"] >= 5  # the rest of the three seconds away: nothing drawn
+
+
+def test_the_window_round_the_last_corners_finds_the_corners_the_whole_frame_finds(ar_recording):
+    """AprilTag 3 looks first in the frame masked outside a window round the tag's last corners: on every frame of
+    the path (the look-away window included) the same corners to the bit as the whole frame's, found through the
+    window in most frames; a frame whose tag lies outside the window (the frames taken out of order) is searched
+    whole."""
+    import cv2
+
+    from arsim.core.png import read_frame
+    from arsim.tracking.detectors import AprilTag3Detector
+
+    rec, linear = ar_recording
+    table = rec.meta["table"]
+    windowed, whole = (AprilTag3Detector(table["tag_family"], table["tag_id"]) for _ in range(2))
+    lut = np.clip(np.round(255 * linear / linear[-1]), 0, 255).astype(np.uint8)
+    greys = [cv2.LUT(cv2.cvtColor(read_frame(rec.folder / f["file"]), cv2.COLOR_RGB2GRAY), lut) for f in rec.frames]
+    through_window = fell_back = 0
+    for grey in greys + greys[::-7]:  # (then backwards, seven frames at a time: jumps the window may not hold)
+        last = windowed.last
+        in_window = None if last is None else windowed._in_window(grey, last)
+        found = windowed.corners(grey)
+        expected = whole._find(np.ascontiguousarray(grey))
+        assert (found is None) == (expected is None)
+        if found is not None:
+            assert np.array_equal(found, expected)
+            through_window += in_window is not None
+            fell_back += last is not None and in_window is None
+        if in_window is not None:
+            assert np.array_equal(in_window, expected)
+    assert through_window >= 0.8 * sum(whole._find(np.ascontiguousarray(g)) is not None for g in greys)
+    assert fell_back > 0  # (some jump left the window: the whole frame found the tag)
