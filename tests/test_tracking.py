@@ -180,7 +180,7 @@ def test_the_window_round_the_last_corners_finds_the_corners_the_whole_frame_fin
     through_window = fell_back = 0
     for grey in greys + greys[::-7]:  # (then backwards, seven frames at a time: jumps the window may not hold)
         last = windowed.last
-        in_window = None if last is None else windowed._in_window(grey, last)
+        in_window = None if last is None else windowed._in_window(grey, windowed._window(grey.shape, last))
         found = windowed.corners(grey)
         expected = whole._find(np.ascontiguousarray(grey))
         assert (found is None) == (expected is None)

@@ -53,10 +53,12 @@ class AprilTag3Detector:
     def corners(self, grey: np.ndarray) -> np.ndarray | None:
         grey = np.ascontiguousarray(grey)
         if self.last is not None:
-            found = self._in_window(grey, self.last)
-            if found is not None:
-                self.last = found
-                return found
+            window = self._window(grey.shape, self.last)
+            if window != (0, 0, grey.shape[1], grey.shape[0]):  # (a tag that fills the frame: the frame is the window)
+                found = self._in_window(grey, window)
+                if found is not None:
+                    self.last = found
+                    return found
         self.last = self._find(grey)
         return self.last
 
@@ -68,15 +70,20 @@ class AprilTag3Detector:
                 return d.corners[::-1].astype(np.float64) - 0.5
         return None
 
-    def _in_window(self, grey: np.ndarray, last: np.ndarray) -> np.ndarray | None:
-        """The tag found in the frame with everything outside the window about `last` flat; None where it is not,
-        or lies too near a masked edge."""
-        h, w = grey.shape
+    def _window(self, shape: tuple[int, int], last: np.ndarray) -> tuple[int, int, int, int]:
+        """(x0, y0, x1, y1), exclusive: the window about the corners `last`, on the threshold tiles' grid."""
+        h, w = shape
         low, high = last.min(axis=0), last.max(axis=0)
         pad = WINDOW_GROWTH * float((high - low).max()) + WINDOW_PAD_PX
         t = self.tile
         x0, y0 = (max(int((v - pad) // t) * t, 0) for v in low)
-        x1, y1 = min(int(-(-(high[0] + pad) // t)) * t, w), min(int(-(-(high[1] + pad) // t)) * t, h)
+        return x0, y0, min(int(-(-(high[0] + pad) // t)) * t, w), min(int(-(-(high[1] + pad) // t)) * t, h)
+
+    def _in_window(self, grey: np.ndarray, window: tuple[int, int, int, int]) -> np.ndarray | None:
+        """The tag found in the frame with everything outside the window flat; None where it is not, or lies too
+        near one of the window's masked edges."""
+        h, w = grey.shape
+        x0, y0, x1, y1 = window
         if self._masked is None or self._masked.shape != grey.shape:
             self._masked = np.empty_like(grey)
         masked = self._masked
