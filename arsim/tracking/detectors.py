@@ -29,9 +29,9 @@ CORNER_SIGMA_PX = {"apriltag3": 0.05, "opencv": 0.10}
 # The tag is looked for first round where it was last found: the frame outside a window about its last corners
 # (grown by WINDOW_GROWTH of the tag's size and WINDOW_PAD_PX, on the quad search's tile grid) is set to one flat
 # grey, which AprilTag's thresholding leaves out. The frame keeps its size, so the detector computes in the same
-# coordinates on the same pixels: the same corners to the bit (the default, indoor, outdoor_sun, quick and
-# lost_tag AR paths, every frame) in about a third of the time. A tag found too near the window's edge, or none,
-# and the whole frame is searched.
+# coordinates on the same pixels: the same corners to the bit (the default, indoor, outdoor_sun, quick, night and
+# lost_tag AR paths, every frame) in a third to two thirds of the time. A tag found too near the window's edge, or
+# none, and the whole frame is searched.
 WINDOW_GROWTH = 0.5
 WINDOW_PAD_PX = 16
 WINDOW_EDGE_PX = 8  # a tag's corners must lie this far inside the window's masked edges
