@@ -568,8 +568,8 @@ def _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream,
     key_t = times[keys]
     # (frames(k) may give the frame at KeyframeFeatures.small's size already)
     keyframes = keyframe_features(camera, direct, keys, frames, phase(0))
-    # The features kept here (where the worker is not started, its calls run here) and, once, in the worker (SIFT's
-    # whole numbers as uint8 there)
+    # The features kept here (where the worker is not started, or cannot run a call, its calls run here) and, once,
+    # in the worker (SIFT's whole numbers as uint8 there)
     keep_features(token, [k.bearings for k in keyframes], [k.descriptors for k in keyframes])
     side.call(keep_features, token, [k.bearings for k in keyframes], [_compact(k.descriptors) for k in keyframes])
     rng = np.random.default_rng(seed)

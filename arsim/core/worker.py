@@ -55,10 +55,7 @@ class SideWorker:
                 continue
             if theirs.cancel():  # (not begun: it never will be)
                 self.taken += 1
-                try:
-                    ours.set_result(function(*args))
-                except Exception as e:
-                    ours.set_exception(e)
+                _compute(ours, function, args)
                 taken()
 
 
@@ -71,14 +68,19 @@ def _copy_outcome(ours: Future, function: Callable, args: tuple, theirs: Future)
         ours.cancel()
     elif isinstance(error := theirs.exception(), BrokenProcessPool):
         if ours.running() or ours.set_running_or_notify_cancel():  # (running: settle marked it, the worker had it)
-            try:
-                ours.set_result(function(*args))
-            except Exception as e:
-                ours.set_exception(e)
+            _compute(ours, function, args)
     elif error is not None:
         ours.set_exception(error)
     else:
         ours.set_result(theirs.result())
+
+
+def _compute(ours: Future, function: Callable, args: tuple) -> None:
+    """function(*args) computed here into ours (running), its exception as well."""
+    try:
+        ours.set_result(function(*args))
+    except Exception as e:
+        ours.set_exception(e)
 
 
 def _done(function, *args) -> Future:
