@@ -109,6 +109,33 @@ def test_the_shader_code_guesses_are_within_their_stated_steps(kind, gamma):
     assert (steps == 1) == (kind != "gamma" or 0.5 <= gamma <= 2.6)  # one step for the usual curves
 
 
+@pytest.mark.parametrize("kind, gamma, contrast", [("srgb", 2.2, 2.0), ("s-curve", 2.2, 2.0), ("s-curve", 2.2, 0.5),
+                                                    ("gamma", 2.2, 2.0), ("gamma", 1.0, 2.0), ("gamma", 10.0, 2.0)])
+def test_the_shader_one_comparison_codes_equal_the_curve_s_codes(kind, gamma, contrast):
+    """ResponseCurve.step_table, the GL camera's codes in one comparison: every float32 value in [0, 1] gets
+    lowest + (x >= step) = encode(x), its bin found by a float32 sqrt that may be an ulp off either way; the
+    values next to each threshold (within 4 ulp) included. A steep curve has no such table."""
+    curve = ResponseCurve(kind, gamma=gamma, contrast=contrast)
+    bins = 1024
+    table = curve.step_table(bins)
+    if kind == "gamma" and gamma == 10.0:
+        assert table is None  # (its dark codes are far denser than the bins)
+        return
+    assert table is not None
+    packed, steps = table
+    lowest = (packed[:, None] >> np.array([0, 8, 16, 24], dtype=np.uint32)).ravel() & 255
+    rng = np.random.default_rng(5)
+    t = curve.thresholds_float32()
+    near = (t[:, None].view(np.int32) + np.arange(-4, 5, dtype=np.int32)).view(np.float32).ravel()
+    x = np.concatenate([rng.random(300000), rng.random(100000) * 1e-4, near, [0.0, 1.0]]).astype(np.float32)
+    x = x[(x >= 0) & (x <= 1)]
+    root = np.sqrt(x)
+    for off in (-1, 0, 1):  # (an ulp off)
+        r = np.nextafter(root, np.float32(np.inf) if off > 0 else np.float32(0)) if off else root
+        b = np.minimum((r * np.float32(bins)).astype(np.int64), bins - 1)
+        np.testing.assert_array_equal(lowest[b] + (x >= steps[b]), curve.encode(x.astype(np.float64)))
+
+
 @pytest.mark.parametrize("shape", [(480, 640), (61, 83)])
 def test_compiled_metering_equals_the_numpy_formula(shape):
     rgba = np.random.default_rng(2).integers(0, 256, shape + (4,), dtype=np.uint8)

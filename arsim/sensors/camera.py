@@ -22,6 +22,11 @@ RESPONSES = ("srgb", "gamma", "s-curve")
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
+def _packed_codes(codes: np.ndarray) -> np.ndarray:
+    """8-bit codes four to a uint32, the first in the low byte (what the camera shader unpacks)."""
+    return (codes.astype(np.uint32).reshape(-1, 4) << np.array([0, 8, 16, 24], dtype=np.uint32)).sum(axis=1, dtype=np.uint32)
+
+
 @dataclass(frozen=True)
 class ResponseCurve:
     """Maps relative linear exposure in [0, 1] to display values in [0, 1] and back.
@@ -85,19 +90,36 @@ class ResponseCurve:
         t32 = t.astype(np.float32)
         return np.where(t32.astype(np.float64) < t, np.nextafter(t32, np.float32(np.inf)), t32)
 
+    def _bin_codes(self, bins: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per bin k of sqrt(x) in [k, k + 1) / bins: the code at its centre, and the codes at its ends widened by
+        1e-5 of x each way (a float32 sqrt a few ulp off bins a value next door): the codes a shader can meet there."""
+        k = np.arange(bins)
+        thresholds = self._code_thresholds
+        centre = np.searchsorted(thresholds, ((k + 0.5) / bins) ** 2, side="right")
+        lowest = np.searchsorted(thresholds, (k / bins) ** 2 * (1 - 1e-5), side="right")
+        highest = np.searchsorted(thresholds, ((k + 1) / bins) ** 2 * (1 + 1e-5), side="right")
+        return centre, lowest, highest
+
     def guess_table(self, bins: int) -> tuple[np.ndarray, int]:
         """First guesses of the code for the GL camera, four 8-bit codes per uint32, and how many code
         steps a guess can be off. Bin k covers sqrt(x) in [k, k + 1) / bins (even in sqrt(x), so that
         dark values, where the curves are steep, get fine bins) and holds the code of its centre. A
         lookup instead of the curve's pow and tanh; the shader settles the guess against the exact
         thresholds. The step count allows for a float32 sqrt a few ulp off (a value binned next door)."""
-        k = np.arange(bins)
-        guesses = np.searchsorted(self._code_thresholds, ((k + 0.5) / bins) ** 2, side="right")
-        lowest = np.searchsorted(self._code_thresholds, (k / bins) ** 2 * (1 - 1e-5), side="right")
-        highest = np.searchsorted(self._code_thresholds, ((k + 1) / bins) ** 2 * (1 + 1e-5), side="right")
+        guesses, lowest, highest = self._bin_codes(bins)
         steps = int(max(np.max(guesses - lowest), np.max(highest - guesses), 1))
-        packed = (guesses.astype(np.uint32).reshape(-1, 4) << np.array([0, 8, 16, 24], dtype=np.uint32))
-        return packed.sum(axis=1, dtype=np.uint32), steps
+        return _packed_codes(guesses), steps
+
+    def step_table(self, bins: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The GL camera's codes in one comparison, where the curve allows it: per bin of guess_table's, the lowest
+        code a value binned there can have (four per uint32) and the one float32 threshold that can fall among
+        those values (+inf where none), so that the code is lowest + (x >= step). None where a bin holds two
+        thresholds (steep curves: gamma far from 2.2); the shader then settles guess_table's guesses."""
+        _, lowest, highest = self._bin_codes(bins)
+        if np.max(highest - lowest) > 1:
+            return None
+        steps = np.append(self.thresholds_float32(), np.float32(np.inf))[np.where(highest > lowest, lowest, 255)]
+        return _packed_codes(lowest), steps.astype(np.float32)
 
     def decode(self, codes: np.ndarray) -> np.ndarray:
         """Relative exposure of 8-bit codes (a 256-entry table of the inverse curve)."""

@@ -16,11 +16,17 @@ uniform float gain;                 // iso / base_iso / full_well: electrons to 
 uniform uint noise_key;             // camera.noise_key(seed, stream, frame)
 uniform int width;
 uniform int height;
+#ifndef ONE_STEP
 uniform float thresholds[255];      // code c covers [t[c-1], t[c]) (float32, rounded up)
-// A first guess of the code for x in [0, 1]: the code at the centre of x's bin, with bins even in sqrt(x)
-// (ResponseCurve.guess_table, four codes per word); the exact thresholds then settle it.
+#endif
+// Codes from bins even in sqrt(x) (ResponseCurve.guess_table and step_table, four codes per word).
 const uint GUESS_BINS = 1024u;
 uniform uint guess_table[GUESS_BINS / 4u];
+#ifdef ONE_STEP
+// The curve holds at most one threshold per bin: the bin's lowest code, plus one where x reaches that threshold
+// (+inf where the bin holds none). Two lookups a channel instead of a guess and two settling steps (the same codes).
+uniform float step_table[GUESS_BINS];
+#endif
 
 uvec4 pcg_hash(uvec4 v) {  // camera.pcg_hash
     uvec4 state = v * 747796405u + 2891336453u;
@@ -28,12 +34,15 @@ uvec4 pcg_hash(uvec4 v) {  // camera.pcg_hash
     return (word >> 22u) ^ word;
 }
 
-// The number of thresholds <= x, exactly as ResponseCurve.encode counts them: from the guess, at most
-// SETTLE_STEPS (defined by the host: guess_table's bound) down, then up. Loops with a fixed count, as
-// llvmpipe runs data-dependent loops far slower.
+// The number of thresholds <= x, exactly as ResponseCurve.encode counts them. Without ONE_STEP: from the guess
+// (the code at the centre of x's bin), at most SETTLE_STEPS (defined by the host: guess_table's bound) down, then
+// up. Loops with a fixed count, as llvmpipe runs data-dependent loops far slower.
 uint encode(float x) {
     uint bin = min(uint(sqrt(x) * float(GUESS_BINS)), GUESS_BINS - 1u);
     uint c = (guess_table[bin >> 2u] >> (8u * (bin & 3u))) & 255u;
+#ifdef ONE_STEP
+    return c + uint(x >= step_table[bin]);
+#else
     for (int i = 0; i < SETTLE_STEPS; i++) {
         if (c > 0u && x < thresholds[c - 1u]) c--;
     }
@@ -41,6 +50,7 @@ uint encode(float x) {
         if (c < 255u && x >= thresholds[c]) c++;
     }
     return c;
+#endif
 }
 
 void main() {
