@@ -31,7 +31,7 @@ from arsim.core.progress import quiet_stage
 from arsim.core.resample import to_layout
 from arsim.capture.response import RecoveredResponse
 from arsim.evaluate.metrics import map_error
-from arsim.run.cache import ENTRY, StageCache, code_digest, key_of, read_state, settings_digest, sha256_file, snapshot, write_state
+from arsim.run.cache import ENTRY, StageCache, code_digest, key_of, read_state, settings_digest, sha256_files, snapshot, write_state
 from arsim.scenario.loader import scenario_to_toml
 from arsim.scenario.sections import Scenario
 
@@ -244,7 +244,8 @@ def recording_digest(folder: Path, hashes: dict[str, str], recorded: Scenario | 
 
 
 def _hash_files(root: Path, rels) -> dict[str, str]:
-    return {rel: sha256_file(root / rel) for rel in rels}
+    rels = list(rels)
+    return dict(zip(rels, sha256_files([root / rel for rel in rels])))
 
 
 def _with_scenario_toml(folder: Path, scenario: Scenario) -> None:
@@ -519,7 +520,8 @@ def _run_stages(scenario: Scenario, source: str, out: Path, recording: Path | No
         hashes = {k.removeprefix("recording/"): v for k, v in hashes.items()}
     else:
         files = [recording] if recording.is_file() else sorted(p for p in recording.rglob("*") if p.is_file())
-        hashes = {p.relative_to(recording).as_posix() if p != recording else p.name: sha256_file(p) for p in files}
+        hashes = dict(zip([p.relative_to(recording).as_posix() if p != recording else p.name for p in files],
+                          sha256_files(files)))
     sweep, ar = recorded_pair(recording)
     recorded = recording_scenario(sweep)  # the sensors as recorded, whatever the scenario given says
     # What of the truth the recording lacks (a real recording: all of it); what needs it is left out, saying why.
