@@ -158,3 +158,40 @@ def test_pairs_matched_in_shares_in_the_worker_process_match_as_one_after_the_ot
         else:
             assert np.array_equal(got[0].as_quat(), expected[0].as_quat()) and np.array_equal(got[1], expected[1])
             assert got[2] == expected[2]
+
+
+def test_keyframe_features_found_early_on_their_thread_equal_those_found_in_the_refinement():
+    """EarlyFeatures finds the keyframes' SIFT features from the full frames before the response is known;
+    keyframe_features then takes them and adds the direct images: the same bearings, descriptors and direct images
+    as found there from the small frames. Stopped early, it gives what it found and the rest is found there."""
+    import threading
+    import time
+
+    from arsim.capture.direct import DirectImages
+    from arsim.capture.refine import EarlyFeatures, keyframe_features
+
+    probe = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", 256)
+    camera = CameraIntrinsics.from_fov(320, 240, 60.0)
+    curve = ResponseCurve()
+    views = Rotation.from_euler("Y", np.linspace(0, 60, 6)[:, None], degrees=True)
+    frames = [curve.encode(environment_view_reference(probe, camera, r) * 0.3) for r in views]
+    small = KeyframeFeatures(camera).small
+    direct = DirectImages(KeyframeFeatures(camera).camera, camera, curve.decode(np.arange(256))[:, None].repeat(3, 1),
+                          np.ones((240, 320)))
+    keys = np.arange(6)
+    reads = []
+    early = EarlyFeatures(camera, keys, lambda k: (reads.append(threading.current_thread().name), frames[k])[1])
+    deadline = time.monotonic() + 60
+    while len(early.found) < len(keys) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    found = early.stop()
+    assert sorted(found) == list(keys) and set(reads) == {"keyframes_early"}
+    here = keyframe_features(camera, direct, keys, lambda k: small(frames[k]))
+    taken = keyframe_features(camera, direct, keys, lambda k: small(frames[k]), found={k: found[k] for k in (0, 2, 5)})
+    for a, b in zip(here, taken):
+        assert a.frame == b.frame and len(a.bearings) > 20
+        np.testing.assert_array_equal(a.bearings, b.bearings)
+        np.testing.assert_array_equal(a.descriptors, b.descriptors)
+        np.testing.assert_array_equal(a.image.grey, b.image.grey)
+    stopped = EarlyFeatures(camera, keys, lambda k: (time.sleep(0.05), frames[k])[1])
+    assert len(stopped.stop()) < len(keys)

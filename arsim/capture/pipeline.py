@@ -15,7 +15,7 @@ from arsim.capture.accumulate import ProbeAccumulator, SensorNoise
 from arsim.capture.align import Aligner
 from arsim.capture.direct import DirectImages
 from arsim.capture.drift import DriftFilter
-from arsim.capture.refine import GyroNoise, KeyframeFeatures, Refinement, refine
+from arsim.capture.refine import EarlyFeatures, GyroNoise, KeyframeFeatures, Refinement, refine, select_keyframes
 from arsim.capture.response import RecoveredResponse, calibrate_response, photometric_response
 from arsim.core.conventions import anglemap_disk_mask
 from arsim.core.errors import ArsimError
@@ -201,16 +201,33 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     sensor = SensorSettings.of(scenario.device.camera)
     camera = recording_camera(rec)
     falloff = recording_falloff(rec, camera, sensor)
+    files = [rec.folder / f["file"] for f in rec.frames]
+    uncorrected = fused_camera_orientations(rec)
+    times = np.array([f["t_ns"] for f in rec.frames]) / 1e9
+    early = None
+    if settings.refine and settings.align_every:  # (the refinement's keyframes: its metered frames, as below)
+        keys = select_keyframes(np.arange(0, len(files), len(bracket)), uncorrected, times)
+        early = EarlyFeatures(camera, keys, lambda k: read_frame(files[k]))
+    try:
+        return _capture(rec, settings, progress, scenario, bracket, sensor, camera, falloff, files, uncorrected, times,
+                        early)
+    finally:
+        if early is not None:
+            early.stop()
+
+
+def _capture(rec: Recording, settings: CaptureSettings, progress, scenario: Scenario, bracket, sensor: SensorSettings,
+             camera, falloff: np.ndarray, files: list, uncorrected: Rotation, times: np.ndarray,
+             early: EarlyFeatures | None) -> CaptureResult:
+    """capture's work once the keyframes' features are being found (early)."""
     response = recording_response(rec, sensor)
     exposure_levels = sorted(set(bracket), reverse=True)  # the accumulator's levels, longest exposure first
     accumulator = new_accumulator(settings.size, camera, falloff, sensor, len(exposure_levels))
     aligner = Aligner(camera, falloff, response, scenario.run.seed)
-    uncorrected = fused_camera_orientations(rec)
     truth = frame_camera_orientations(rec) if rec.groundtruth is not None else None
     _check_overlap(rec, uncorrected, camera)
     gyro_noise = GyroNoise.of(scenario.device.gyroscope)
     corrected, aligned = [], np.zeros(len(rec.frames), dtype=bool)
-    times = np.array([f["t_ns"] for f in rec.frames]) / 1e9
     accelerometer = scenario.device.accelerometer
     drift = DriftFilter(uncorrected, times, gyro_noise, accelerometer.turn_on_bias + accelerometer.bias_instability, KP,
                         scenario.capture.fusion == "rotation-vector", settings.size)
@@ -219,7 +236,6 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
     final_online, online_snapshots = not settings.refine or not settings.align_every, []
     features = KeyframeFeatures(camera)
     metered_small: dict[int, np.ndarray] = {}  # what the refinement's keyframes are taken from
-    files = [rec.folder / f["file"] for f in rec.frames]
     scales, gain = exposure_scales(rec, sensor), gains(rec, sensor)
     decoded, kept_bytes = [None] * len(files), 0  # (for the refined pass)
     for k, codes in enumerate(read_frames(files)):  # (decoded ahead, overlapping the alignment)
@@ -266,7 +282,7 @@ def capture(rec: Recording, settings: CaptureSettings | None = None,
                         scenario.device.camera.hfov_deg, camera, gyro_noise,
                         scenario.run.seed, (gyro.t_ns, gyro.values, Rotation.from_matrix(mount)),
                         DirectImages(features.camera, camera, response.linear, falloff),
-                        lambda fraction: progress(ONLINE_SHARE + REFINE_SHARE * fraction, accumulator.coverage()))
+                        lambda fraction: progress(ONLINE_SHARE + REFINE_SHARE * fraction, accumulator.coverage()), early)
     # with no keyframe pair the refinement has only the IMU's orientations: the online pass's, with the bias its
     # filter learnt from whatever it aligned, are no worse
     final = refinement.orientations if refinement.loop_closures else online

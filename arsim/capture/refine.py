@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, wait
@@ -200,22 +201,60 @@ class KeyframeFeatures:
         """The frame at the size features are found at (what to keep of a frame that may become a keyframe)."""
         return cv2.resize(codes, (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA)
 
-    def __call__(self, frame: int, codes: np.ndarray) -> Keyframe:
-        small = codes if codes.shape[:2] == (self.camera.height, self.camera.width) else self.small(codes)
+    def features(self, small: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """(bearings, descriptors) of the SIFT features of a frame at small's size (what does not depend on the
+        response: EarlyFeatures finds them before it is known)."""
         grey = self.clahe.apply(cv2.cvtColor(small, cv2.COLOR_RGB2GRAY))
         # (clipped and black regions have no texture of the scene: no mask needed, SIFT finds none there)
         keypoints, descriptors = self.sift.detectAndCompute(grey, None)
         points = np.array([k.pt for k in keypoints], dtype=np.float64).reshape(-1, 2)
-        return Keyframe(frame, self.camera.unproject(points), descriptors,
-                        None if self.direct is None else self.direct(small))
+        return self.camera.unproject(points), descriptors
+
+    def __call__(self, frame: int, codes: np.ndarray, found: tuple | None = None) -> Keyframe:
+        """The keyframe of frame's codes (full size or small's); found: its features() where found before."""
+        small = codes if codes.shape[:2] == (self.camera.height, self.camera.width) else self.small(codes)
+        bearings, descriptors = found if found is not None else self.features(small)
+        return Keyframe(frame, bearings, descriptors, None if self.direct is None else self.direct(small))
+
+
+class EarlyFeatures:
+    """The keyframes' SIFT features found on a thread of its own, in order, while the capture does other work: the
+    response's calibration (OpenCV, one core) and the online pass leave part of the second core idle. frames(k):
+    frame k's codes. stop() lets the keyframe under way finish and gives what was found; the refinement finds the
+    rest (keyframe_features). The same features as found there (the same image, SIFT and CLAHE)."""
+
+    def __init__(self, camera: CameraIntrinsics, keys, frames: Callable[[int], np.ndarray]):  # camera: the frames'
+        self.found: dict[int, tuple] = {}
+        self._stopping = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(camera, [int(k) for k in keys], frames),
+                                        name="keyframes_early", daemon=True)
+        self._thread.start()
+
+    def _run(self, camera: CameraIntrinsics, keys: list[int], frames) -> None:
+        features = KeyframeFeatures(camera)
+        for k in keys:
+            if self._stopping.is_set():
+                return
+            try:
+                codes = frames(k)
+            except Exception:  # (an unreadable frame: the capture reads it again itself, and says what is wrong)
+                return
+            self.found[k] = features.features(features.small(codes))
+
+    def stop(self) -> dict[int, tuple]:
+        self._stopping.set()
+        self._thread.join()
+        return self.found
 
 
 def keyframe_features(camera: CameraIntrinsics, direct: DirectImages | None, keys, frames,
-                      progress: Callable[[float], None] = lambda fraction: None) -> list[Keyframe]:
+                      progress: Callable[[float], None] = lambda fraction: None,
+                      found: dict[int, tuple] | None = None) -> list[Keyframe]:
     """KeyframeFeatures of each keyframe (frames(k): its codes), on threads that each keep their own
     detector (OpenCV's SIFT and CLAHE run without the GIL): the default sweep's 299 keyframes took 23 ms
-    each one after another, 8 ms on two threads, the same features. progress(fraction done) is called
-    from this thread (the workers only append to their lists)."""
+    each one after another, 8 ms on two threads, the same features. found: features already found per frame
+    (EarlyFeatures). progress(fraction done) is called from this thread (the workers only append to their lists)."""
+    found = found or {}
     workers = max(1, min(4, os.cpu_count() or 1, len(keys)))
     shares: list[list[Keyframe]] = [[] for _ in range(workers)]
 
@@ -223,7 +262,7 @@ def keyframe_features(camera: CameraIntrinsics, direct: DirectImages | None, key
         features = KeyframeFeatures(camera)
         features.direct = direct
         for k in keys[start::workers]:
-            shares[start].append(features(int(k), frames(int(k))))
+            shares[start].append(features(int(k), frames(int(k)), found.get(int(k))))
 
     with ThreadPoolExecutor(workers) as pool:
         pending = {pool.submit(share, start) for start in range(workers)}
@@ -532,13 +571,13 @@ def calibrate_gyroscope(intervals: GyroIntervals, constraints: list[Constraint],
 def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_deg: float,
            camera: CameraIntrinsics, gyro: GyroNoise, seed: int = 0, gyro_stream: tuple | None = None,
            direct: DirectImages | None = None,
-           progress: Callable[[float], None] = lambda fraction: None) -> Refinement:
+           progress: Callable[[float], None] = lambda fraction: None, early: EarlyFeatures | None = None) -> Refinement:
     """Refined orientations of every frame. times (K,): seconds; metered: indices of the frames taken at the
     metered exposure (the ones matched); imu: the IMU's camera-to-world orientations (K,); frames(k): frame
     k's 8-bit codes; gyro_stream: (t_ns, omega, camera-to-device mount) of the raw gyroscope, whose relative
     rotations between keyframes are then the chain, calibrated (else the fused orientation's, uncalibrated);
     direct: how keyframes are aligned directly where no feature pair reaches them (none: they are not);
-    progress(fraction done), now and then.
+    progress(fraction done), now and then; early: keyframes' features found before (stopped here).
 
     In three steps: the gyroscope calibrated against the pairs taken close in time (matched and gated
     against the raw gyroscope, which drifts little over a few seconds), so that its chain alone starts
@@ -552,22 +591,23 @@ def refine(times: np.ndarray, metered: np.ndarray, imu: Rotation, frames, hfov_d
         return lambda fraction: progress(min(low + PHASE_SHARES[k] * fraction, 1.0))
 
     keys = select_keyframes(metered, imu, times)
+    found = early.stop() if early is not None else None
     token = next(_TOKENS)
     with side_worker(enabled=len(keys) >= SIDE_KEYFRAMES) as side:
         side.call(_warm)  # (the worker starts and imports while the keyframes' features are found)
         try:
             return _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream, direct, phase, side,
-                           token, began)
+                           token, began, found)
         finally:
             drop_features(token)
 
 
 def _refine(times, keys, imu, frames, hfov_deg, camera, gyro, seed, gyro_stream, direct, phase, side: SideWorker,
-            token: int, began: float) -> Refinement:
+            token: int, began: float, found: dict[int, tuple] | None) -> Refinement:
     """refine's work from its keyframes on, the guided matching and the direct alignments shared with `side`."""
     key_t = times[keys]
     # (frames(k) may give the frame at KeyframeFeatures.small's size already)
-    keyframes = keyframe_features(camera, direct, keys, frames, phase(0))
+    keyframes = keyframe_features(camera, direct, keys, frames, phase(0), found)
     # The features kept here (where the worker is not started, or cannot run a call, its calls run here) and, once,
     # in the worker (SIFT's whole numbers as uint8 there)
     keep_features(token, [k.bearings for k in keyframes], [k.descriptors for k in keyframes])
