@@ -113,3 +113,26 @@ def test_a_full_disk_midway_through_a_recording_leaves_no_half_recording(tmp_pat
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "imu.csv: No space left on device" in err[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
+
+
+def test_json_text_encodes_numpy_values_and_writes_non_finite_figures_as_null():
+    """json_text at once where every number is finite (NumPy arrays and scalars as they come) and through the strict
+    conversion where one is not: the same text as the strict conversion either way, null for NaN and infinities."""
+    import json
+
+    import numpy as np
+
+    from arsim.core.files import _strict, json_text
+
+    rng = np.random.default_rng(0)
+    values = [
+        {"a": np.float32(1.1), "b": np.arange(5), "c": (1, 2.5, np.int64(3)), "d": [np.bool_(True), None, "x"],
+         5: np.array([[1.5, 2.25]]), "e": np.array([], dtype=float), "f": (np.uint8(7), np.float16(0.5))},
+        {"x": float("nan"), "y": np.array([1.0, np.inf]), "z": {"w": np.float64(-np.inf)}},
+        [np.float64(0.1), 1e300, -0.0, np.array(3.0), rng.random((4, 3))],
+    ]
+    for value in values:
+        for indent in (2, None):
+            assert json_text(value, indent) == json.dumps(_strict(value), indent=indent, allow_nan=False) + "\n"
+    assert json.loads(json_text(values[1])) == {"x": None, "y": [1.0, None], "z": {"w": None}}
+    assert json.loads(json_text(values[0]))["b"] == [0, 1, 2, 3, 4]

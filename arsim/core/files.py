@@ -80,10 +80,19 @@ def _strict(value):
     return value
 
 
+def _as_list(value):
+    if hasattr(value, "tolist"):  # NumPy arrays and scalars
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
 def json_text(value, indent: int | None = 2) -> str:
     """Strict JSON (RFC 8259) of value, a newline at the end: a figure that is not finite (a percentile
     that is infinite, a mean over no frames) is null, as JSON has no NaN or Infinity."""
-    return json.dumps(_strict(value), indent=indent, allow_nan=False) + "\n"
+    try:  # (most values hold only finite numbers: encoded at once, NumPy's as they come, not copied first)
+        return json.dumps(value, indent=indent, allow_nan=False, default=_as_list) + "\n"
+    except ValueError:  # (a float that is not finite)
+        return json.dumps(_strict(value), indent=indent, allow_nan=False) + "\n"
 
 
 # The file that marks a folder as an arsim command's output: such a folder is replaced whole by the next
