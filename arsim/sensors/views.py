@@ -136,19 +136,18 @@ class CameraRenderer(EnvironmentRenderer):
         # The response curve: the codes from a table in one comparison where the curve allows it
         # (ResponseCurve.step_table: the same codes, 0.6 ms less of CPU a 640 x 480 frame), else a guess from a
         # table settled by the exact thresholds.
-        guesses, steps = response.guess_table(self.GUESS_BINS)
         one_step = response.step_table(self.GUESS_BINS)
-        defines = {"ONE_STEP": 1} if one_step is not None else {"SETTLE_STEPS": steps}
+        if one_step is not None:
+            defines, tables = {"ONE_STEP": 1}, {"guess_table": one_step[0], "step_table": one_step[1]}
+        else:
+            guesses, steps = response.guess_table(self.GUESS_BINS)
+            defines, tables = {"SETTLE_STEPS": steps}, {"guess_table": guesses, "thresholds": response.thresholds_float32()}
         self.frame_program = self.ctx.compute_shader(_scene_source("camera_frame.comp", table is not None, defines))
         # The vignetting rides in the rays' fourth channel: one texel fetch per pixel for both.
         falloff = vignette(camera.height, camera.width, sensor.vignetting).astype(np.float32)
         self.rays.write(np.dstack([pixel_rays(camera).astype(np.float32), falloff]).tobytes())
-        if one_step is not None:
-            self.frame_program["guess_table"].write(one_step[0].tobytes())
-            self.frame_program["step_table"].write(one_step[1].tobytes())
-        else:
-            self.frame_program["thresholds"].write(response.thresholds_float32().astype("f4").tobytes())
-            self.frame_program["guess_table"].write(guesses.tobytes())
+        for name, values in tables.items():
+            self.frame_program[name].write(values.tobytes())
         self.frame_program["read_noise_var"].value = sensor.read_noise_e**2
         self.frame_program["width"].value = camera.width
         self.frame_program["height"].value = camera.height
