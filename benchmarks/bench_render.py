@@ -14,6 +14,13 @@ two medians per step:
      operator);
   7  the same box blended from a texture already uploaded (no text drawn).
 
+And the least shading the thesis allows: the renderer's own steps 4, 6 and 7, with step 5 drawn on the floor's
+geometry by a shader that does only what Alg. 5.1 asks of every pixel, its two angle-map lookups (the
+irradiance map at the normal, the reflection map in the mirror direction) and kd, ks: no ray-cast surface, no
+normal or light map (a sphere's quad cut to its outline, the normal of the quad's point about the centre; a
+mesh's interpolated normal). What the renderer
+spends above it is what its exact surfaces and its light and normal maps cost.
+
     python benchmarks/bench_render.py [--frames N] [--width W --height H] [--log-average]
 """
 
@@ -24,7 +31,7 @@ import numpy as np
 
 from arsim.core.assets import assets_dir
 from arsim.core.conventions import CameraIntrinsics
-from arsim.core.gl import create_gl_context
+from arsim.core.gl import core_shader, create_gl_context
 from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.lighting.fast import fast_maps
@@ -59,6 +66,76 @@ void main() {
     colour = vec4(pixel.rgb, 1.0);
 }
 """
+LEAST_VERT = """#version 430
+uniform mat4 model;
+uniform mat4 view_projection;
+in vec3 in_position;
+in vec3 in_normal;
+out vec3 v_world;
+out vec3 v_normal;
+void main() {
+    vec4 world = model * vec4(in_position, 1.0);
+    v_world = world.xyz;
+    v_normal = mat3(model) * in_normal;
+    gl_Position = view_projection * world;
+}
+"""
+LEAST_FRAG = """
+uniform sampler2D irradiance_map;
+uniform sampler2D reflection_map;
+uniform vec3 kd;
+uniform vec3 ks;
+uniform vec3 eye;
+#ifdef SPHERE
+uniform vec3 center;
+uniform float radius;
+#else
+in vec3 v_normal;
+#endif
+in vec3 v_world;
+layout(location = 0) out vec4 hdr;
+vec3 lookup(sampler2D map, vec3 d) {
+    vec2 st = anglemap_st(d);
+    return texture(map, vec2(st.x, 1.0 - st.y)).rgb;
+}
+void main() {
+    vec3 v = normalize(v_world - eye);
+#ifdef SPHERE
+    vec3 oc = eye - center;  // (the quad's corners, outside the outline, are not the sphere's)
+    float b = dot(v, oc);
+    if (b * b < dot(oc, oc) - radius * radius) discard;
+    vec3 n = normalize(v_world - center);
+#else
+    vec3 n = normalize(v_normal);
+#endif
+    hdr = vec4(kd * lookup(irradiance_map, n) + ks * lookup(reflection_map, reflect(v, n)), 1.0);
+}
+"""
+QUAD = np.array([(-1, -1), (1, -1), (-1, 1), (-1, 1), (1, -1), (1, 1)], dtype="f4")  # an impostor's, counter-clockwise
+
+
+class LeastRenderer(Renderer):
+    """The renderer with step 5 at the least shading the thesis allows (module docstring): the floor's geometry,
+    two angle-map lookups a pixel."""
+
+    def add(self, obj) -> None:
+        super().add(obj)
+        d = self.objects[-1]
+        header = "#version 430\n" + ("#define SPHERE\n" if d.sphere is not None else "") + core_shader("anglemap.glsl")
+        if d.sphere is not None:
+            program = self.ctx.program(vertex_shader=_source("sphere.vert", []), fragment_shader=header + LEAST_FRAG)
+            program["center"].value, program["radius"].value = tuple(d.sphere[0]), d.sphere[1]
+            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(QUAD.tobytes()), "2f", "in_corner")])
+        else:
+            program = self.ctx.program(vertex_shader=LEAST_VERT, fragment_shader=header + LEAST_FRAG)
+            program["model"].write(obj.model.T.astype("f4").tobytes())
+            mesh = obj.lods[-1][0] if obj.lods else obj.mesh
+            data = np.hstack([mesh.positions, mesh.normals]).astype("f4")
+            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(data.tobytes()), "3f 3f", "in_position", "in_normal")],
+                                        self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes()))
+        program["irradiance_map"].value, program["reflection_map"].value = 0, 1
+        program["kd"].value, program["ks"].value = tuple(obj.material.kd), tuple(obj.material.ks)
+        d.program, d.vaos, d.errors, d.units, d.texel_world = program, [vao], np.zeros(1), d.units[:2], {}
 
 
 class FloorRenderer(Renderer):
@@ -70,8 +147,7 @@ class FloorRenderer(Renderer):
         if d.sphere is not None:  # the impostor's quad, filled
             program = self.ctx.program(vertex_shader=_source("sphere.vert", []), fragment_shader=FLOOR_FRAG)
             program["center"].value, program["radius"].value = tuple(d.sphere[0]), d.sphere[1]
-            quad = np.array([(-1, -1), (1, -1), (-1, 1), (-1, 1), (1, -1), (1, 1)], dtype="f4")
-            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(quad.tobytes()), "2f", "in_corner")])
+            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(QUAD.tobytes()), "2f", "in_corner")])
         else:
             program = self.ctx.program(vertex_shader=FLOOR_VERT, fragment_shader=FLOOR_FRAG)
             program["model"].write(obj.model.T.astype("f4").tobytes())
@@ -138,10 +214,10 @@ def main() -> None:
     maps = MapSet.of("fast", exponents, fast_maps(env, exponents))
     ctx = create_gl_context()
     camera = CameraIntrinsics.from_fov(args.width, args.height, scenario.device.camera.hfov_deg)
-    renderer, floor = Renderer(camera, maps, ctx), FloorRenderer(camera, maps, ctx)
+    renderer, floor, least = Renderer(camera, maps, ctx), FloorRenderer(camera, maps, ctx), LeastRenderer(camera, maps, ctx)
     for obj in objects:
-        renderer.add(obj)
-        floor.add(obj)
+        for r_ in (renderer, floor, least):
+            r_.add(obj)
     path = ar_path(scenario)
     t = np.linspace(0.0, path.duration, args.frames)
     t = t[path._away(t) == 0.0]  # the tag in view
@@ -153,20 +229,25 @@ def main() -> None:
     query = ctx.query(time=True)
     names = ("background (4)", "objects (5)", "tone mapping (6)", "overlay (7)")
     warm = 3  # the first frames compile and allocate
-    cpu, gl = np.zeros((2, len(t) + warm, 4)), np.zeros((2, len(t) + warm, 4))
+    cpu, gl = np.zeros((3, len(t) + warm, 4)), np.zeros((3, len(t) + warm, 4))
     for n in range(len(t) + warm):
         k = max(n - warm, 0)
         rotation = cam_to_world[k].inv()
         translation = -rotation.apply(positions[k])
-        runs = ((lambda: renderer.background_pass(background),
-                 lambda: renderer.render_objects(rotation, translation),
-                 lambda: renderer.tonemap_pass(r.key, r.white, log_average),
-                 lambda: renderer.overlay_pass([f"frame {k}  16.0 ms", "maps: fast"])),
+
+        def steps(r_):  # the renderer's steps 4-7 (its own, or the least shading's)
+            return (lambda: r_.background_pass(background),
+                    lambda: r_.render_objects(rotation, translation),
+                    lambda: r_.tonemap_pass(r.key, r.white, log_average),
+                    lambda: r_.overlay_pass([f"frame {k}  16.0 ms", "maps: fast"]))
+
+        runs = (steps(renderer),
                 (lambda: floor.background_pass(rgba),
                  lambda: floor.render_objects(rotation, translation),
                  lambda: floor.tonemap_pass(),
-                 lambda: floor.overlay_pass(overlay)))
-        for which in (0, 1) if n % 2 == 0 else (1, 0):  # (neither always first)
+                 lambda: floor.overlay_pass(overlay)),
+                steps(least))
+        for which in np.roll([0, 1, 2], n % 3):  # (none always first)
             for s, work in enumerate(runs[which]):
                 ctx.finish()
                 start = time.perf_counter()
@@ -179,12 +260,16 @@ def main() -> None:
           f"({np.linalg.norm(positions, axis=1).min():.2f}-{np.linalg.norm(positions, axis=1).max():.2f} m from the tag), "
           f"log_average {log_average}, ms:")
     print(f"  {'step':20s} {'CPU median':>10s} {'p95':>7s} {'max':>7s}   {'GL median':>9s} {'p95':>7s}   "
-          f"{'floor median':>12s} {'p95':>7s} {'max':>7s}   {'median/floor':>12s}")
+          f"{'floor median':>12s} {'p95':>7s} {'max':>7s}   {'median/floor':>12s}   {'least median':>12s} {'least/floor':>11s}")
     for s, name in enumerate(names + ("steps 4-7",)):
-        c, g, f = (cpu[0, :, s], gl[0, :, s], cpu[1, :, s]) if s < 4 else (cpu[0].sum(axis=1), gl[0].sum(axis=1), cpu[1].sum(axis=1))
+        c, g, f, m = ((cpu[0, :, s], gl[0, :, s], cpu[1, :, s], cpu[2, :, s]) if s < 4 else
+                      (cpu[0].sum(axis=1), gl[0].sum(axis=1), cpu[1].sum(axis=1), cpu[2].sum(axis=1)))
         print(f"  {name:20s} {np.median(c):10.2f} {np.percentile(c, 95):7.2f} {c.max():7.2f}   "
               f"{np.median(g):9.2f} {np.percentile(g, 95):7.2f}   "
-              f"{np.median(f):12.2f} {np.percentile(f, 95):7.2f} {f.max():7.2f}   {np.median(c) / np.median(f):12.2f}")
+              f"{np.median(f):12.2f} {np.percentile(f, 95):7.2f} {f.max():7.2f}   {np.median(c) / np.median(f):12.2f}   "
+              f"{np.median(m):12.2f} {np.median(m) / np.median(f):11.2f}")
+    print("  (least: the renderer's steps with step 5 at the least shading Alg. 5.1 allows, two angle-map lookups a pixel "
+          "on the floor's geometry)")
 
 
 if __name__ == "__main__":
