@@ -390,30 +390,3 @@ def test_a_compact_recording_holds_the_same_pixels_and_renders_byte_identical_fr
     assert_one_line_error(arsim("info", damaged / "ar"), "frames.mkv: is damaged", "record again")
     (damaged / "frames.mkv").write_bytes((damaged / "frames.mkv").read_bytes()[:1000])
     assert_one_line_error(arsim("info", damaged), "frames.mkv")
-
-
-@pytest.mark.parametrize("failing", ["ar", "sweep"])
-def test_a_segment_that_fails_stops_the_other_and_its_error_is_raised(tmp_path, monkeypatch, failing):
-    """The AR path's segment is recorded on a thread beside the sweep's (record): where one fails, the other
-    stops at its next frame rather than running to its end, and record raises the failing segment's own
-    error (not the other's cancellation)."""
-    import arsim.sensors.recording as recording
-    from arsim.scenario.loader import load_scenario
-
-    long = SHORT.replace("duration_s = 2.0", "duration_s = 20.0")  # 601 frames a segment
-    (tmp_path / "s.toml").write_text(long.format(seed=1))
-    scenario = load_scenario(tmp_path / "s.toml")
-    written = recording.write_frame_png
-
-    def write(path, frame):
-        in_ar = path.parent.parent.name == "ar"
-        if in_ar == (failing == "ar") and path.name == "000000.png":
-            raise ArsimError(f"{failing} failed on purpose")
-        written(path, frame)
-
-    monkeypatch.setattr(recording, "write_frame_png", write)
-    out = tmp_path / "rec"
-    with pytest.raises(ArsimError, match=f"{failing} failed on purpose"):
-        recording.record(scenario, out)
-    other = out / "frames" if failing == "ar" else out / "ar" / "frames"
-    assert len(list(other.glob("*.png"))) < 601  # stopped early

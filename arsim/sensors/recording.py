@@ -26,10 +26,9 @@ import io
 import json
 import math
 import os
-import threading
 from collections import deque
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -194,60 +193,18 @@ def record(scenario: Scenario, out_dir: Path, progress: Callable[[float], None] 
     probe = load_environment(scenario.environment)
     # The capture's meta.json points to the other segments' folders.
     links = {"ar_recording": s.folder for s in segments if s.name == "ar"}
-    # The segments after the first (the AR path) are recorded on a thread beside it: each alone leaves part of
-    # the two cores idle, where its GL pass and its PNG writers wait on each other, and together they fill them
-    # (the default recording: 17.8 s against 20.2 s, medians of five alternating runs, the same files). Each
-    # segment has streams and files of its own. Progress is reported from this thread only.
-    done = [0.0] * len(segments)  # frames done per segment
-    total = sum(counts)
-
-    def counted(k: int, report: bool) -> Callable[[float], None]:
-        def update(fraction: float) -> None:
-            done[k] = fraction * counts[k]
-            if report:
-                progress(sum(done) / total)
-        return update
-
-    cancel = threading.Event()  # set when a segment fails: the others stop at their next frame
-
-    def beside(k: int, segment: _Segment) -> float:
-        try:
-            return _record_segment(scenario, probe, segment, out_dir / segment.folder, counted(k, False), {}, compact,
-                                   cancel)
-        except BaseException:
-            cancel.set()
-            raise
-
-    with ThreadPoolExecutor(1, thread_name_prefix="record") as side:
-        later = [side.submit(beside, k, segment) for k, segment in enumerate(segments) if k > 0]
-        try:
-            yaw = [_record_segment(scenario, probe, segments[0], out_dir / segments[0].folder, counted(0, True), links,
-                                   compact, cancel)]
-            pending = set(later)
-            while pending:
-                pending = wait(pending, timeout=0.25).not_done
-                progress(sum(done) / total)
-            yaw += [future.result() for future in later]
-        except _Cancelled:
-            for future in later:
-                future.result()  # (raises the error that stopped this segment)
-            raise
-        except BaseException:
-            cancel.set()
-            raise
-    progress(1.0)
+    yaw = []
+    for k, segment in enumerate(segments):
+        done, total = sum(counts[:k]), sum(counts)
+        yaw.append(_record_segment(scenario, probe, segment, out_dir / segment.folder,
+                                   lambda f: progress((done + f * counts[k]) / total),
+                                   links if segment.name == "capture" else {}, compact))
     return RecordSummary(counts[0], segments[0].trajectory.duration, yaw[0], counts[1] if len(counts) > 1 else 0)
 
 
-class _Cancelled(Exception):
-    """A segment stopped because another failed (record)."""
-
-
 def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, out_dir: Path,
-                    progress: Callable[[float], None], extra_meta: dict, compact: bool = False,
-                    cancel: threading.Event | None = None) -> float:
-    """Write one segment's files; returns the fused yaw error at its end (degrees). cancel: once set, the
-    segment stops at its next frame (_Cancelled)."""
+                    progress: Callable[[float], None], extra_meta: dict, compact: bool = False) -> float:
+    """Write one segment's files; returns the fused yaw error at its end (degrees)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "frames").mkdir(exist_ok=True)
     clear_files(out_dir / "frames", "*.png")  # an earlier recording's frames, a killed writer's temp file
@@ -273,7 +230,7 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
     burst_views = trajectory.camera_orientation(candidates, mount)
     burst_rows = (_write_burst(out_dir, renderer, burst_views, scenario, response)
                   if segment.burst else [])
-    rows = _write_frames(scenario, segment, renderer, response, mount, out_dir, progress, compact, cancel)
+    rows = _write_frames(scenario, segment, renderer, response, mount, out_dir, progress, compact)
     if compact and not any((out_dir / "frames").iterdir()):
         (out_dir / "frames").rmdir()
     renderer.release()
@@ -287,8 +244,7 @@ def _record_segment(scenario: Scenario, probe: np.ndarray, segment: _Segment, ou
 
 
 def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mount, out_dir: Path,
-                  progress: Callable[[float], None], compact: bool = False,
-                  cancel: threading.Event | None = None) -> list[tuple]:
+                  progress: Callable[[float], None], compact: bool = False) -> list[tuple]:
     """The segment's frames under auto-exposure (bracketed ones at the metered exposure times 2^ev),
     rendered and written as PNG into out_dir/frames (compact: into the video out_dir/frames.mkv); returns
     frames.csv's rows."""
@@ -308,8 +264,6 @@ def _write_frames(scenario: Scenario, segment: _Segment, renderer, response, mou
             video = stack.enter_context(FrameVideo(out_dir / video_name, cam.width, cam.height, cam.fps))
         pending: deque = deque()
         for k in range(n_frames):
-            if cancel is not None and cancel.is_set():
-                raise _Cancelled(segment.name)
             used = ae.next_frame_settings()
             # Bracketed frames (for highlights) take the metered exposure times 2^ev; only metered
             # frames steer the auto-exposure.
