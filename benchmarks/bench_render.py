@@ -114,6 +114,22 @@ void main() {
 QUAD = np.array([(-1, -1), (1, -1), (-1, 1), (-1, 1), (1, -1), (1, 1)], dtype="f4")  # an impostor's, counter-clockwise
 
 
+def coarsest_geometry(ctx, d, obj, vertex: str, fragment: str, sphere_fragment: str, normals: bool = False):
+    """The object's cheapest geometry with the given shaders, (program, vertex array): a ray-cast sphere's quad
+    (sphere.vert, sphere_fragment), else its coarsest mesh (vertex, fragment; positions, and normals where asked)."""
+    if d.sphere is not None:
+        program = ctx.program(vertex_shader=_source("sphere.vert", []), fragment_shader=sphere_fragment)
+        program["center"].value, program["radius"].value = tuple(d.sphere[0]), d.sphere[1]
+        return program, ctx.vertex_array(program, [(ctx.buffer(QUAD.tobytes()), "2f", "in_corner")])
+    program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
+    program["model"].write(obj.model.T.astype("f4").tobytes())
+    mesh = obj.lods[-1][0] if obj.lods else obj.mesh
+    names = ("in_position", "in_normal") if normals else ("in_position",)
+    data = np.hstack([mesh.positions, mesh.normals] if normals else [mesh.positions]).astype("f4")
+    return program, ctx.vertex_array(program, [(ctx.buffer(data.tobytes()), " ".join(["3f"] * len(names)), *names)],
+                                     ctx.buffer(mesh.indices.astype(np.uint32).tobytes()))
+
+
 class LeastRenderer(Renderer):
     """The renderer with step 5 at the least shading the thesis allows (module docstring): the floor's geometry,
     two angle-map lookups a pixel."""
@@ -121,18 +137,9 @@ class LeastRenderer(Renderer):
     def add(self, obj) -> None:
         super().add(obj)
         d = self.objects[-1]
-        header = "#version 430\n" + ("#define SPHERE\n" if d.sphere is not None else "") + core_shader("anglemap.glsl")
-        if d.sphere is not None:
-            program = self.ctx.program(vertex_shader=_source("sphere.vert", []), fragment_shader=header + LEAST_FRAG)
-            program["center"].value, program["radius"].value = tuple(d.sphere[0]), d.sphere[1]
-            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(QUAD.tobytes()), "2f", "in_corner")])
-        else:
-            program = self.ctx.program(vertex_shader=LEAST_VERT, fragment_shader=header + LEAST_FRAG)
-            program["model"].write(obj.model.T.astype("f4").tobytes())
-            mesh = obj.lods[-1][0] if obj.lods else obj.mesh
-            data = np.hstack([mesh.positions, mesh.normals]).astype("f4")
-            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(data.tobytes()), "3f 3f", "in_position", "in_normal")],
-                                        self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes()))
+        header = "#version 430\n" + core_shader("anglemap.glsl")
+        program, vao = coarsest_geometry(self.ctx, d, obj, LEAST_VERT, header + LEAST_FRAG,
+                                         header.replace("\n", "\n#define SPHERE\n", 1) + LEAST_FRAG, normals=True)
         program["irradiance_map"].value, program["reflection_map"].value = 0, 1
         program["kd"].value, program["ks"].value = tuple(obj.material.kd), tuple(obj.material.ks)
         d.program, d.vaos, d.errors, d.units, d.texel_world = program, [vao], np.zeros(1), d.units[:2], {}
@@ -144,16 +151,7 @@ class FloorRenderer(Renderer):
     def add(self, obj) -> None:
         super().add(obj)
         d = self.objects[-1]
-        if d.sphere is not None:  # the impostor's quad, filled
-            program = self.ctx.program(vertex_shader=_source("sphere.vert", []), fragment_shader=FLOOR_FRAG)
-            program["center"].value, program["radius"].value = tuple(d.sphere[0]), d.sphere[1]
-            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(QUAD.tobytes()), "2f", "in_corner")])
-        else:
-            program = self.ctx.program(vertex_shader=FLOOR_VERT, fragment_shader=FLOOR_FRAG)
-            program["model"].write(obj.model.T.astype("f4").tobytes())
-            mesh = obj.lods[-1][0] if obj.lods else obj.mesh
-            vao = self.ctx.vertex_array(program, [(self.ctx.buffer(mesh.positions.astype("f4").tobytes()), "3f", "in_position")],
-                                        self.ctx.buffer(mesh.indices.astype(np.uint32).tobytes()))
+        program, vao = coarsest_geometry(self.ctx, d, obj, FLOOR_VERT, FLOOR_FRAG, FLOOR_FRAG)  # (a sphere's quad filled)
         d.program, d.vaos, d.errors, d.units, d.texel_world = program, [vao], np.zeros(1), [], {}
         if not hasattr(self, "copy"):
             self.copy = self.ctx.program(vertex_shader=_source("rects.vert", []), fragment_shader=COPY_FRAG)
