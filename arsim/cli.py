@@ -886,7 +886,7 @@ def _map_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sh-window", choices=WINDOWS, default=MapParameters.sh_window,
                    help="sh: plain truncation (none, the default) or a window against ringing (README: Irradiance and reflection maps)")
     p.add_argument("--samples", type=_positive("--samples"), default=MapParameters.samples, metavar="K",
-                   help=f"mc: importance samples per texel (default {MapParameters.samples})")
+                   help=f"mc: importance samples per point: a texel, or a point of the lobe's grid (default {MapParameters.samples})")
     p.add_argument("--seed", type=_non_negative("--seed"), default=0, help="mc: random seed, 0 or more (default 0)")
 
 

@@ -177,6 +177,27 @@ def test_mc_is_deterministic_per_seed(courtyard32):
     assert not np.array_equal(mc_maps(courtyard32, [10], 8, seed=4)[0], a[0])
 
 
+def test_mc_on_lobe_grids_is_as_accurate_as_at_the_texels(monkeypatch):
+    """At 64² s = 10 and 20 are estimated on their lobes' grids and read bicubically: on three probes, over
+    three seeds, their mean error against brute force stays within 2 % of the error the same samples give at
+    every texel (measured: 0.90-1.00 times it on the eight bundled probes)."""
+    from arsim.lighting import mc
+
+    n, exponents = 64, [10, 20]
+    inside = anglemap_disk_mask(n)
+    assert all(mc.lobe_grid(s, int(inside.sum())) is not None for s in exponents)
+    envs = [to_layout(read_hdr(ENVMAPS[i]), "anglemap", n).astype(np.float64) for i in (0, 1, 3)]
+    gridded = [[mc_maps(env, exponents, 64, seed) for seed in range(3)] for env in envs]
+    monkeypatch.setattr(mc, "lobe_grid", lambda exponent, texels: None)  # every lobe at the texels
+    for env, grid_maps in zip(envs, gridded):
+        exact = accurate_maps(env, exponents)
+        at_texels = [mc_maps(env, exponents, 64, seed) for seed in range(3)]
+        for k in range(len(exponents)):
+            grid_error = np.mean([map_error(exact[k][inside], m[k][inside]).mean_percent for m in grid_maps])
+            texel_error = np.mean([map_error(exact[k][inside], m[k][inside]).mean_percent for m in at_texels])
+            assert grid_error < 1.02 * texel_error, (exponents[k], grid_error, texel_error)
+
+
 def test_mc_pattern_is_hammersley_turned_per_texel_by_a_hash():
     from arsim.lighting.mc import hammersley, texel_turns
 

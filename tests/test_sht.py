@@ -10,13 +10,13 @@ from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.evaluate.metrics import map_error
 from arsim.lighting.accurate import accurate_maps
-from arsim.lighting.mc import mc_maps
+from arsim.lighting.mc import lobe_grid, mc_maps
 from arsim.lighting.methods import MapParameters, bake
 from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh import (GRID_MAX_ORDER, MAX_ORDER, WINDOWS, _disk_sampler, sh_coefficients, sh_evaluate, sh_maps,
                                sh_synthesis_grid, sh_window, synthesis_grid_size)
-from arsim.lighting.sht import (TRUNCATION, alm_from_real, bands_for_exponent, real_from_alm, sht_maps,
-                               sht_maps_from_source)
+from arsim.lighting.sht import (TRUNCATION, alm_from_real, bands_for_exponent, grid_directions, real_from_alm, sh_angles,
+                               sht_maps, sht_maps_from_source)
 from tests.conftest import ENVMAPS
 
 EXPONENTS = [1, 2, 10, 20, 40, 80, 160, 320, 1280]
@@ -174,12 +174,29 @@ def test_windowed_sh_falls_with_order_at_every_exponent_on_every_bundled_asset(p
 
 
 @pytest.mark.parametrize("filtered", [True, False])
-def test_mc_compiled_equals_its_numpy_path(bright64, filtered):
-    """mc's compiled samples: the same uniforms, directions, levels and lookups as the NumPy path."""
-    env = bright64[::2, ::2].copy()
-    fast = mc_maps(env, [1, 20, 1280], 16, seed=3, filtered=filtered)
-    slow = mc_maps(env, [1, 20, 1280], 16, seed=3, filtered=filtered, compiled=False)
+@pytest.mark.parametrize("step", [1, 2])
+def test_mc_compiled_equals_its_numpy_path(bright64, filtered, step):
+    """mc's compiled samples: the same uniforms, directions, levels and lookups as the NumPy path, at the
+    texels and (64²: s = 10 and 20) at the points of a lobe's grid."""
+    env = bright64[::step, ::step].copy()
+    exponents = [1, 10, 20, 1280]
+    on_grids = [lobe_grid(s, int(anglemap_disk_mask(env.shape[0]).sum())) is not None for s in exponents]
+    assert on_grids == ([False, True, True, False] if step == 1 else [False] * 4)
+    fast = mc_maps(env, exponents, 16, seed=3, filtered=filtered)
+    slow = mc_maps(env, exponents, 16, seed=3, filtered=filtered, compiled=False)
     np.testing.assert_allclose(fast, slow, rtol=1e-5, atol=1e-6 * slow.max())
+
+
+def test_grid_directions_are_the_grid_coordinates_points():
+    """The points mc estimates a lobe at (sht.grid_directions) sit where the lookups read the grid
+    (sht.sh_angles, as grid_coordinates turns texels into rows and columns): row r, column c exactly."""
+    n_theta, n_phi = 9, 16
+    theta, phi = sh_angles(grid_directions(n_theta, n_phi))
+    rows, cols = theta / np.pi * (n_theta - 1), phi / (2 * np.pi) * n_phi
+    r, c = np.divmod(np.arange(n_theta * n_phi), n_phi)
+    inner = (r > 0) & (r < n_theta - 1)  # (at the poles every column is the same point: phi is arbitrary)
+    np.testing.assert_allclose(rows, r, atol=1e-9)
+    np.testing.assert_allclose(cols[inner], c[inner], atol=1e-9)
 
 
 def test_sht_from_the_source_itself(bright64):

@@ -13,6 +13,7 @@ outside the disk (a constant environment stays constant through every conversion
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -86,9 +87,13 @@ def _equirect_sampler(equirect: np.ndarray) -> Callable[[np.ndarray], np.ndarray
     return sample
 
 
+@functools.lru_cache(maxsize=2)
 def beyond_rim_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, cols) (N, N): every texel's own index inside the disk, outside it its nearest texel inside."""
+    """(rows, cols) (N, N): every texel's own index inside the disk, outside it its nearest texel inside
+    (read-only; kept for the last sizes asked: the transform costs as much as extending a map with them)."""
     _, (ri, ci) = ndimage.distance_transform_edt(~anglemap_disk_mask(n), return_indices=True)
+    for a in (ri, ci):
+        a.setflags(write=False)
     return ri, ci
 
 

@@ -34,7 +34,7 @@ class MapParameters:
     sh_order: int = SH_ORDER  # sh: bands 0..sh_order-1
     sh_faithful: bool = False  # sh: evaluate Y_lm as Alg. 2.5/2.6 (factorials in double)
     sh_window: str = "none"  # sh: plain truncation, or a window against ringing (sh.WINDOWS)
-    samples: int = 64  # mc: importance samples per texel
+    samples: int = 64  # mc: importance samples per point (a texel, or a point of the lobe's grid)
     seed: int = 0  # mc
     bounds_threshold: float = DEFAULT_BOUNDS_THRESHOLD  # bounds: smallest lobe value kept
 

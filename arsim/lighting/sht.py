@@ -219,6 +219,22 @@ def grid_coordinates(n: int, n_theta: int, n_phi: int) -> tuple[np.ndarray, np.n
     return rows, cols
 
 
+@functools.lru_cache(maxsize=32)
+def grid_directions(n_theta: int, n_phi: int) -> np.ndarray:
+    """(n_theta * n_phi, 3) unit directions of the Clenshaw-Curtis grid's points, row-major (the inverse of
+    sh_angles: d = (-sin theta cos phi, sin theta sin phi, cos theta)), kept per grid."""
+    theta = np.arange(n_theta) * (np.pi / (n_theta - 1))
+    phi = np.arange(n_phi) * (2 * np.pi / n_phi)
+    sin_t = np.sin(theta)[:, None]
+    d = np.empty((n_theta, n_phi, 3))
+    d[..., 0] = -sin_t * np.cos(phi)
+    d[..., 1] = sin_t * np.sin(phi)
+    d[..., 2] = np.cos(theta)[:, None]
+    d = d.reshape(-1, 3)
+    d.setflags(write=False)
+    return d
+
+
 def grid_size(exponent: float, bands: int) -> tuple[int, int]:
     """(n_theta, n_phi) of the grid an exponent's map (its first `bands` bands) is synthesised on:
     GRID_SAMPLES_PER_BAND samples per band in theta of the bands above GRID_TRUNCATION, so that the bicubic
