@@ -584,7 +584,7 @@ def _probe_and_source(path: Path, size: int | None) -> tuple[np.ndarray, np.ndar
 
 def _parameters(args: argparse.Namespace) -> MapParameters:
     return MapParameters(sh_order=args.sh_order, sh_faithful=args.sh_faithful, sh_window=args.sh_window,
-                         samples=args.samples, seed=args.seed)
+                         samples=args.samples, seed=args.seed, mc_texels=args.mc_texels)
 
 
 def _tracking_p95(m: dict) -> str:
@@ -888,6 +888,9 @@ def _map_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--samples", type=_positive("--samples"), default=MapParameters.samples, metavar="K",
                    help=f"mc: importance samples per point: a texel, or a point of the lobe's grid (default {MapParameters.samples})")
     p.add_argument("--seed", type=_non_negative("--seed"), default=0, help="mc: random seed, 0 or more (default 0)")
+    p.add_argument("--mc-texels", action="store_true",
+                   help="mc: estimate every lobe at every texel (a per-texel grain, 5-8x slower at 512²) instead of on "
+                        "a grid as fine as the lobe needs, read bicubically (README: mc and the speed of sh over its orders)")
 
 
 def _bake_parser(sub: argparse._SubParsersAction) -> None:

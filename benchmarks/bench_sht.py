@@ -3,6 +3,7 @@
     python benchmarks/bench_sht.py [--assets city,interior,sunrise] [--texels 300] [--fine 2048] [--quick]
     python benchmarks/bench_sht.py --speed [--assets city]
     python benchmarks/bench_sht.py --transforms [--assets city]   # ducc0 against SHTns (if installed)
+    python benchmarks/bench_sht.py --mc-figure benchmarks/results/mc_grids.png   # mc on grids and at every texel
 
 --transforms: the grid syntheses `sht` runs at 512² (each exponent's bandlimit and grid), timed with ducc0 in
 double and single precision and with SHTns (double; built from source with FFTW: `apt-get install
@@ -10,7 +11,8 @@ libfftw3-dev && pip install shtns`), and `sht` end to end with its syntheses on 
 non-uniform transform, so the exact texel sums stay on ducc0 either way.
 
 --speed: per asset, `mc` at 64 samples against `sh` at order 64 (nine maps each, best of 3, in the same
-run: both times and their ratio) with mc's error against brute force, then `sh` at orders 3 to 1024, each
+run: both times and their ratio) with mc's error against brute force, and `mc` at every texel (--mc-texels,
+once) likewise, then `sh` at orders 3 to 1024, each
 time and its ratio to order 64's (a speed cliff shows as a ratio far from its neighbours').
 
 Per asset (512² angle map of the bundled equirect, nine exponents):
@@ -157,6 +159,10 @@ def speed(names, texels: int) -> None:
         e = errors(reference, mc_bake.maps, picked)
         print(f"  mc vs brute force at {len(picked)} texels, mean/max %: {row(e)}; mean over exponents "
               f"{np.mean([x.mean_percent for x in e]):.3f}, worst max {max(x.max_percent for x in e):.2f}")
+        texels_s, _, texels_bake = wall_and_cpu(1, lambda: bake(env, EXPONENTS, "mc", MapParameters(samples=64, mc_texels=True)))
+        e = errors(reference, texels_bake.maps, picked)
+        print(f"  mc at every texel (--mc-texels): {texels_s:.3f} s ({texels_s / sh_s:.2f}x sh64); mean/max %: {row(e)}; "
+              f"mean over exponents {np.mean([x.mean_percent for x in e]):.3f}, worst max {max(x.max_percent for x in e):.2f}")
         if name != names[0]:
             continue
         times = {}
@@ -185,6 +191,32 @@ def speed(names, texels: int) -> None:
             alone[order] = best_of(3, lambda: transforms(order))
         print("  ducc0 alone on the disk texels (3 analyses + 27 syntheses), seconds, its ratio to its order 64, and sh's "
               "time over it: " + ", ".join(f"{o}: {t:.3f} ({t / alone[64]:.2f}x; sh {times[o] / t:.2f}x)" for o, t in alone.items()))
+
+
+def mc_figure(path: Path, name: str = "night", exponents=(1, 10, 160, 1280)) -> None:
+    """mc's maps at 64 samples on the lobes' grids (the default) and at every texel (--mc-texels), side by side:
+    the same noise in mean, a grid's grain against a texel's."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    env = to_layout(read_hdr(assets_dir() / "envmaps" / f"{name}.exr"), "anglemap", 512)
+    rows = {"grids (default)": bake(env, exponents, "mc", MapParameters(samples=64)).maps,
+            "every texel (--mc-texels)": bake(env, exponents, "mc", MapParameters(samples=64, mc_texels=True)).maps}
+    fig, axes = plt.subplots(len(rows), len(exponents), figsize=(3.2 * len(exponents), 3.6 * len(rows)))
+    for k, s in enumerate(exponents):
+        scale = np.percentile(rows["every texel (--mc-texels)"][k], 99.5)  # (one scale per column: the same light)
+        for axis, (label, maps) in zip(axes[:, k], rows.items()):
+            axis.imshow(np.clip(maps[k] / scale, 0, 1) ** (1 / 2.2))
+            axis.set_title(f"s = {s}, {label}", fontsize=9)
+            axis.axis("off")
+    fig.suptitle(f"mc, 64 samples, {name}, 512² angle maps (gamma 2.2, each column scaled alike)")
+    fig.tight_layout(h_pad=2.0)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    print(f"wrote {path}")
 
 
 def transforms(names) -> None:
@@ -260,7 +292,12 @@ def main() -> None:
     parser.add_argument("--skip-windows", action="store_true", help="skip the window sweep and mc")
     parser.add_argument("--speed", action="store_true", help="only mc against sh at order 64, and sh's order sweep")
     parser.add_argument("--transforms", action="store_true", help="only ducc0 against SHTns on sht's syntheses")
+    parser.add_argument("--mc-figure", type=Path, metavar="PNG",
+                        help="only mc's maps on grids and at every texel side by side (night), written to PNG")
     args = parser.parse_args()
+    if args.mc_figure:
+        mc_figure(args.mc_figure)
+        return
     if args.transforms:
         transforms(args.assets.split(","))
         return

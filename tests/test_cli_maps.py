@@ -73,6 +73,25 @@ def test_sh_parameters_are_recorded(tmp_path, probe32):
     assert json.loads((tmp_path / "w" / "bake.json").read_text())["parameters"]["sh_window"] == "hann"
 
 
+def test_mc_bakes_on_lobe_grids_unless_told_every_texel(tmp_path):
+    from arsim.core.resample import to_layout
+    from arsim.lighting.mc import mc_maps
+
+    probe = tmp_path / "probe64.exr"
+    write_exr(probe, to_layout(read_hdr(ENVMAPS[1]), "anglemap", 64).astype(np.float32))
+    env = read_hdr(probe)
+    for flags, grids in (((), True), (("--mc-texels",), False)):
+        out = tmp_path / f"grids_{grids}"
+        r = arsim("bake", probe, "-o", out, "--method", "mc", "--samples", "16", "--seed", "2", "--spec", "10", *flags)
+        assert r.returncode == 0, r.stderr
+        assert json.loads((out / "bake.json").read_text())["parameters"] == {"samples": 16, "seed": 2,
+                                                                            "mc_texels": not grids}
+        want = mc_maps(env, [10], 16, seed=2, grids=grids)[0]  # (s = 10 has a grid at 64²: the two differ)
+        np.testing.assert_array_equal(read_hdr(out / "reflection_s10.exr"), want)
+    assert not np.array_equal(read_hdr(tmp_path / "grids_True" / "reflection_s10.exr"),
+                              read_hdr(tmp_path / "grids_False" / "reflection_s10.exr"))
+
+
 def test_compare_methods_writes_tables_and_figures(tmp_path, probe32):
     r = arsim("compare-methods", probe32, "-o", tmp_path, "--spec", "1,20", "--methods", "fast,mipmap,sh",
               "--sh-orders", "3,6")

@@ -155,10 +155,10 @@ def bordered_chain(chain: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.
 
 
 def mc_maps(env: np.ndarray, exponents: Sequence[float], samples: int = 64, seed: int = 0,
-            filtered: bool = True, compiled: bool = True) -> np.ndarray:
+            filtered: bool = True, compiled: bool = True, grids: bool = True) -> np.ndarray:
     """Maps (E, N, N, 3) float32 from `samples` importance samples per point (filtered or not): the
     Hammersley set, turned about each point's direction by texel_turns, at the points of each lobe's grid
-    (lobe_grid) read bicubically at the texels, or at the texels themselves.
+    (lobe_grid) read bicubically at the texels, or at the texels themselves (always where grids is False).
     compiled: each set of points in one pass of mc_kernel over a float32 chain, every exponent estimated
     there at once; False: NumPy, float64 (the same points and lookups)."""
     check_samples(samples)
@@ -170,7 +170,7 @@ def mc_maps(env: np.ndarray, exponents: Sequence[float], samples: int = 64, seed
     texel_solid_angle = (2.0 * np.pi / n) ** 2
     groups = {}  # grid (None: the texels) -> the exponents' indices estimated at its points
     for k, s in enumerate(exponents):
-        groups.setdefault(lobe_grid(s, len(texels)), []).append(k)
+        groups.setdefault(lobe_grid(s, len(texels)) if grids else None, []).append(k)
     if compiled:
         flat, offsets, sizes = bordered_chain(chain)
         tables = pattern_tables(exponents, samples, texel_solid_angle)

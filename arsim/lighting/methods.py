@@ -36,6 +36,7 @@ class MapParameters:
     sh_window: str = "none"  # sh: plain truncation, or a window against ringing (sh.WINDOWS)
     samples: int = 64  # mc: importance samples per point (a texel, or a point of the lobe's grid)
     seed: int = 0  # mc
+    mc_texels: bool = False  # mc: every lobe estimated at every texel instead of on its grid (mc.lobe_grid)
     bounds_threshold: float = DEFAULT_BOUNDS_THRESHOLD  # bounds: smallest lobe value kept
 
     def check(self) -> None:
@@ -108,8 +109,8 @@ METHODS = {
                from_source=lambda env, source, ex, p: sht_maps_from_source(source, env.shape[0], ex)),
         # mc bakes every exponent in one pass over the texels (its frames and chain shared): all shared time.
         Method("mc", "Monte Carlo importance sampling with MIP-filtered samples (Colbert and Krivanek)",
-               lambda env, ex, p: dict(zip(map(float, ex), mc_maps(env, ex, p.samples, p.seed))),
-               lambda env, maps, s, p: maps[s], ("samples", "seed")),
+               lambda env, ex, p: dict(zip(map(float, ex), mc_maps(env, ex, p.samples, p.seed, grids=not p.mc_texels))),
+               lambda env, maps, s, p: maps[s], ("samples", "seed", "mc_texels")),
     )
 }
 
