@@ -91,6 +91,19 @@ def test_sh_matches_the_ring_sums_within_1e_6(order):
         np.testing.assert_allclose(new[k][inside], old[k], rtol=1e-6, atol=1e-6 * np.abs(old[k]).max())
 
 
+@pytest.mark.parametrize("window", ["none", "hann"])
+def test_sh_bakes_every_low_order_map_in_one_pass_as_map_by_map(bright64, window):
+    """Up to RINGS_MAX_ORDER a bake of `sh` evaluates all its maps in one pass over the rings: the same maps,
+    to the bit, as sh_maps gives one exponent at a time."""
+    from arsim.lighting.sh import RINGS_MAX_ORDER
+
+    exponents = [1, 10, 80, 1280]
+    for order in (5, RINGS_MAX_ORDER):
+        baked = bake(bright64, exponents, "sh", MapParameters(sh_order=order, sh_window=window)).maps
+        one_by_one = np.stack([sh_maps(bright64, [s], order, window=window)[0] for s in exponents])
+        np.testing.assert_array_equal(baked, one_by_one)
+
+
 def test_sh_beyond_the_grid_orders_is_evaluated_at_the_texels():
     n, order = 16, GRID_MAX_ORDER + 8
     env = np.random.default_rng(1).random((n, n, 3))

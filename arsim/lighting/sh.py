@@ -409,7 +409,7 @@ def _lm_packing(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _evaluate_disk_rings(coeffs: np.ndarray, kappas: np.ndarray, n: int) -> np.ndarray:
     """_evaluate_disk for low orders, exactly (up to rounding) and without ducc0's per-call cost (about
     0.015 s a channel at 512², more than order 64's whole grid): the Legendre sums per ring of equal
-    polar angle, then per texel the azimuthal series, in one compiled pass (sh_kernel.ring_series)."""
+    polar angle, then per texel the azimuthal series, in one compiled pass for all the maps (sh_kernel.ring_series)."""
     n_maps, order = kappas.shape
     _, ring_start, cos_phi, sin_phi, by_ring = _disk_rings(n)
     channels = coeffs.shape[1]
@@ -417,11 +417,12 @@ def _evaluate_disk_rings(coeffs: np.ndarray, kappas: np.ndarray, n: int) -> np.n
     first, l, m = _lm_packing(order)
     scale = np.where(m > 0, np.sqrt(2.0), 1.0)[:, None]
     out = np.empty((n_maps, by_ring.size, channels))
+    weights = np.empty((n_maps, 2, channels, l.size))  # (E, 2, C, packed lm): the cos and sin terms' factors
     for e in range(n_maps):
         weighted = scale * kappas[e, l][:, None]
-        weights = np.ascontiguousarray(np.stack([  # (2, C, packed lm): the cos and sin terms' factors
-            weighted * coeffs[l * (l + 1) + m], np.where(m[:, None] > 0, weighted * coeffs[l * (l + 1) - m], 0.0)]).transpose(0, 2, 1))
-        ring_series(legendre, first, weights, ring_start, cos_phi, sin_phi, by_ring, out[e])
+        weights[e] = np.stack([weighted * coeffs[l * (l + 1) + m],
+                               np.where(m[:, None] > 0, weighted * coeffs[l * (l + 1) - m], 0.0)]).transpose(0, 2, 1)
+    ring_series(legendre, first, weights, ring_start, cos_phi, sin_phi, by_ring, out)  # (every map in one pass)
     return out
 
 

@@ -209,35 +209,48 @@ def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den): 
 
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def ring_series(legendre, first, weights, ring_start, cos_phi, sin_phi, texel, out):  # pragma: no cover (compiled)
-    """The low-order SH series at the texels, ring by ring of equal polar angle. Per ring r, its Legendre sums
-    radial[j, c, m] = sum_l legendre[r, first[m] + l - m] weights[j, c, first[m] + l - m] (j = 0: the cos
-    term of m, 1: the sin term), kept in a small buffer; then per texel k of the ring (texels sorted by ring,
-    ring r's from ring_start[r] to ring_start[r + 1]) out[texel[k], c] = sum_m radial[0, c, m] cos(m phi_k)
-    + radial[1, c, m] sin(m phi_k), cos and sin of m phi by the angle-addition recurrence. legendre (rings,
-    order (order + 1) / 2): the orthonormal P_lm packed m by m (first[m]: where m's start). The innermost
-    loops run over contiguous memory, as dot products the compiler vectorises."""
+    """The low-order SH series of E maps at the texels, ring by ring of equal polar angle. Per ring r and map e,
+    its Legendre sums radial[e, j, c, m] = sum_l legendre[r, first[m] + l - m] weights[e, j, c, first[m] + l - m]
+    (j = 0: the cos term of m, 1: the sin term), kept in a small buffer; then per texel k of the ring (texels
+    sorted by ring, ring r's from ring_start[r] to ring_start[r + 1]) out[e, texel[k], c] = sum_m
+    radial[e, 0, c, m] cos(m phi_k) + radial[e, 1, c, m] sin(m phi_k), cos and sin of m phi by the
+    angle-addition recurrence. legendre (rings, order (order + 1) / 2): the orthonormal P_lm packed m by m
+    (first[m]: where m's start). Every map in one pass: a ring's Legendre row is read once and its texels'
+    recurrence runs once for all of them (nine maps at order 16: 0.10 s against 0.16-0.18 s map by map)."""
     order = first.size - 1
-    channels = weights.shape[1]
+    n_maps, _, channels, _ = weights.shape
     for r in numba.prange(ring_start.size - 1):
-        radial = np.empty((2, channels, order))
+        radial = np.empty((n_maps, 2, channels, order))
         row = legendre[r]
-        for j in range(2):
-            for c in range(channels):
-                w = weights[j, c]
-                for m in range(order):
-                    total = 0.0
-                    for i in range(first[m], first[m + 1]):
-                        total += row[i] * w[i]
-                    radial[j, c, m] = total
-        cos_m, sin_m = np.empty(order), np.empty(order)
-        cos_m[0], sin_m[0] = 1.0, 0.0
-        for k in range(ring_start[r], ring_start[r + 1]):
-            c1, s1 = cos_phi[k], sin_phi[k]
-            for m in range(1, order):
-                cos_m[m] = cos_m[m - 1] * c1 - sin_m[m - 1] * s1
-                sin_m[m] = sin_m[m - 1] * c1 + cos_m[m - 1] * s1
-            for c in range(channels):
-                total = 0.0
-                for m in range(order):
-                    total += radial[0, c, m] * cos_m[m] + radial[1, c, m] * sin_m[m]
-                out[texel[k], c] = total
+        for e in range(n_maps):
+            for j in range(2):
+                for c in range(channels):
+                    w = weights[e, j, c]
+                    for m in range(order):
+                        total = 0.0
+                        for i in range(first[m], first[m + 1]):
+                            total += row[i] * w[i]
+                        radial[e, j, c, m] = total
+        # The ring's texels side by side (m outermost): each step of the recurrence and of the sums runs over
+        # them at once, in vector lanes, rather than as a chain of dependent steps per texel.
+        k0, k1 = ring_start[r], ring_start[r + 1]
+        count = k1 - k0
+        c1, s1 = cos_phi[k0:k1], sin_phi[k0:k1]
+        cos_m, sin_m = np.ones(count), np.zeros(count)
+        totals = np.zeros((n_maps, channels, count))
+        for m in range(order):
+            if m > 0:
+                for i in range(count):
+                    cos_next = cos_m[i] * c1[i] - sin_m[i] * s1[i]
+                    sin_m[i] = sin_m[i] * c1[i] + cos_m[i] * s1[i]
+                    cos_m[i] = cos_next
+            for e in range(n_maps):
+                for c in range(channels):
+                    a, b = radial[e, 0, c, m], radial[e, 1, c, m]
+                    t = totals[e, c]
+                    for i in range(count):
+                        t[i] += a * cos_m[i] + b * sin_m[i]
+        for e in range(n_maps):
+            for i in range(count):
+                for c in range(channels):
+                    out[e, texel[k0 + i], c] = totals[e, c, i]
