@@ -31,8 +31,8 @@ from arsim.core.errors import ArsimError
 from arsim.core.resample import extend_beyond_rim
 from arsim.lighting.mc_kernel import mc_values
 from arsim.lighting.mipmap import mip_chain, sample_trilinear
-from arsim.lighting.sh_kernel import cubic_lookup_into
 from arsim.lighting.phong import phong_zonal_coefficients
+from arsim.lighting.sh_kernel import cubic_lookup_into
 from arsim.lighting.sht import MAX_BANDS_SEARCH, grid_coordinates, grid_directions
 
 CHUNK_SAMPLES = 8192 * 64  # NumPy path: samples at once, texels per chunk x samples per texel
