@@ -889,7 +889,7 @@ def _map_options(p: argparse.ArgumentParser) -> None:
                    help=f"mc: importance samples per point: a texel, or a point of the lobe's grid (default {MapParameters.samples})")
     p.add_argument("--seed", type=_non_negative("--seed"), default=0, help="mc: random seed, 0 or more (default 0)")
     p.add_argument("--mc-texels", action="store_true",
-                   help="mc: estimate every lobe at every texel (a per-texel grain, 5-8x slower at 512²) instead of on "
+                   help="mc: estimate every lobe at every texel (a per-texel grain, 4-6x slower at 512²) instead of on "
                         "a grid as fine as the lobe needs, read bicubically (README: mc and the speed of sh over its orders)")
 
 
