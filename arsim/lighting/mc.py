@@ -21,7 +21,6 @@ s = 1280 have 1,000 and 142,000 points (README: `mc` and the speed of `sh` over 
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -31,9 +30,8 @@ from arsim.core.errors import ArsimError
 from arsim.core.resample import extend_beyond_rim
 from arsim.lighting.mc_kernel import mc_values
 from arsim.lighting.mipmap import mip_chain, sample_trilinear
-from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh_kernel import cubic_lookup_into
-from arsim.lighting.sht import MAX_BANDS_SEARCH, grid_coordinates, grid_directions
+from arsim.lighting.sht import bands_above, grid_coordinates, grid_directions
 
 CHUNK_SAMPLES = 8192 * 64  # NumPy path: samples at once, texels per chunk x samples per texel
 BYTES_PER_SAMPLE = 240  # NumPy path: the chunk's arrays (uniforms, directions, pdf, st, lod, RGB) per sample
@@ -58,17 +56,11 @@ GRID_SAMPLES_PER_BAND = 2
 TAIL_TRUNCATION = 1e-5
 
 
-@functools.lru_cache(maxsize=256)
-def _bands(exponent: float, truncation: float) -> int:
-    """The bands whose zonal coefficient is at least `truncation` of band 0's."""
-    kappa = np.abs(phong_zonal_coefficients(float(exponent), MAX_BANDS_SEARCH + 1))
-    return int(np.flatnonzero(kappa >= truncation)[-1]) + 1
-
-
 def lobe_grid(exponent: float, texels: int) -> tuple[int, int] | None:
     """(n_theta, n_phi) of the Clenshaw-Curtis grid (sht.grid_directions) a lobe's map is estimated on, or
     None where that grid would have more points than the map's `texels` (estimated at the texels)."""
-    n_theta = max(GRID_SAMPLES_PER_BAND * _bands(exponent, GRID_TRUNCATION), _bands(exponent, TAIL_TRUNCATION)) + 1
+    s = float(exponent)
+    n_theta = max(GRID_SAMPLES_PER_BAND * bands_above(s, GRID_TRUNCATION), bands_above(s, TAIL_TRUNCATION)) + 1
     n_phi = 2 * (n_theta - 1)
     return (n_theta, n_phi) if n_theta * n_phi < texels else None
 

@@ -156,14 +156,19 @@ def synthesise_cc_grid(alm: np.ndarray, lmax: int, n_theta: int, n_phi: int, out
 
 
 @functools.lru_cache(maxsize=256)
-def bands_for_exponent(exponent: float, truncation: float = TRUNCATION) -> int:
+def bands_above(exponent: float, truncation: float) -> int:
     """Bands 0..b-1 that carry the Phong lobe's zonal coefficients down to `truncation`:
     kappa_l ~ exp(-l^2 / 2s) for large s, but only ~ l^-2.5 for s = 1 (the kink at the horizon: about
-    300 bands); at least MIN_BANDS."""
+    300 bands at 1e-6)."""
     guess = int(np.ceil(np.sqrt(2.0 * exponent * np.log(1.0 / truncation)))) + 2
     kappa = phong_zonal_coefficients(exponent, max(guess, MAX_BANDS_SEARCH) + 1)
     above = np.flatnonzero(np.abs(kappa) >= truncation)
-    return max(MIN_BANDS, int(above[-1]) + 1)
+    return int(above[-1]) + 1
+
+
+def bands_for_exponent(exponent: float, truncation: float = TRUNCATION) -> int:
+    """bands_above, at least MIN_BANDS."""
+    return max(MIN_BANDS, bands_above(exponent, truncation))
 
 
 @functools.lru_cache(maxsize=64)
