@@ -7,7 +7,8 @@ over the frames where the tag is in view (the look-away windows, which draw noth
 Beside it, the floor: the same frames, at the same resolution, in the same context and interleaved frame
 by frame with the renderer's, drawn as cheaply as the steps can be drawn at all, and the ratio of the
 two medians per step:
-  4  the camera frame uploaded as RGBA already (no conversion);
+  4  the camera frame uploaded as RGBA already (no conversion; the renderer's step 4 is the same upload now, as
+     the session decodes its frames to RGBA, so its ratio is 1 but for noise);
   5  the same tile, clear and depth test, each object's coarsest geometry (a ray-cast sphere's quad, a
      mesh's coarsest level of detail) with a shader that writes a constant colour (its alpha the mask);
   6  one pass over the same rectangles that copies the HDR colour where it is set (no average, no
@@ -234,7 +235,7 @@ def main() -> None:
         translation = -rotation.apply(positions[k])
 
         def steps(r_):  # the renderer's steps 4-7 (its own, or the least shading's)
-            return (lambda: r_.background_pass(background),
+            return (lambda: r_.background_pass(rgba),  # (the session decodes its frames as RGBA: core.png.read_frame)
                     lambda: r_.render_objects(rotation, translation),
                     lambda: r_.tonemap_pass(r.key, r.white, log_average),
                     lambda: r_.overlay_pass([f"frame {k}  16.0 ms", "maps: fast"]))

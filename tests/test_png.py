@@ -57,6 +57,9 @@ def test_read_frame_unfilters_arsims_frames_as_opencv_decodes_them(tmp_path, sha
         assert (_written_here(header, pixels) is not None) == fast
         expected = np.repeat(image[..., None], 3, axis=-1) if image.ndim == 2 else image
         assert np.array_equal(read_frame(path), expected)
+        rgba = read_frame(path, alpha=True)  # (what the render loop uploads as it is)
+        assert rgba.shape == (*expected.shape[:2], 4)
+        assert np.array_equal(rgba[..., :3], expected) and (rgba[..., 3] == 255).all()
 
 
 def test_kept_frames_are_the_files_pixels_until_a_file_changes(tmp_path):

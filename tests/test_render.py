@@ -504,3 +504,18 @@ def test_the_torus_proxy_holds_the_torus():
         solid = 2.0 * np.arctan2(dot(a, np.cross(b, c)), la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb)
         np.testing.assert_allclose(solid.sum(axis=1) / (4.0 * np.pi), 1.0, atol=1e-6)
     assert torus_proxy(1.0, 0.9) is None
+
+
+def test_an_rgba_camera_frame_is_the_background_an_rgb_one_is(gl, maps):
+    """Step 4 uploads an RGBA frame (as the session decodes them) as it is, and converts an RGB one: the same
+    output to the byte, with the objects tone-mapped over either."""
+    frame = np.random.default_rng(5).integers(0, 256, (CAMERA.height, CAMERA.width, 3), dtype=np.uint8)
+    r = render(gl, maps, Material(KD, KS, 80.0))
+    outputs = []
+    for background in (frame, np.dstack([frame, np.full(frame.shape[:2], 255, np.uint8)])):
+        r.background_pass(background)
+        r.tonemap_pass()
+        outputs.append(r.read_output())
+    assert (outputs[0] != frame).any()  # (the sphere is drawn over it)
+    assert np.array_equal(outputs[0], outputs[1])
+

@@ -279,7 +279,7 @@ class _OpenVideos(threading.local):
 _open_videos = _OpenVideos()
 
 
-def _read_video_frame(video: Path, index: int) -> np.ndarray:
+def _read_video_frame(video: Path, index: int, alpha: bool = False) -> np.ndarray:
     entry = _open_videos.videos.get(video)
     if entry is None:
         if not video.is_file():
@@ -297,7 +297,7 @@ def _read_video_frame(video: Path, index: int) -> np.ndarray:
         entry[1] = -1
         raise ArsimError(f"{video}: frame {index} cannot be decoded; record again")
     entry[1] = index + 1
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGBA if alpha else cv2.COLOR_BGR2RGB)
 
 
 def png_of_frame(path: Path) -> bytes:
@@ -375,32 +375,38 @@ def write_frame_png(path: Path, frame: np.ndarray) -> None:
     _KEPT.put(path, frame)
 
 
-def read_frame(path: Path, check: bool = True) -> np.ndarray:
+def read_frame(path: Path, check: bool = True, alpha: bool = False) -> np.ndarray:
     """(H, W, 3) uint8 RGB of an 8-bit image file (a recording's frame, a run's rendered frame), or of a frame in
     a video (video_frame_name). check=False leaves out png_problem, for a file this process has read and checked
-    before."""
+    before. alpha: (H, W, 4) RGBA with alpha 255 instead, the layout the renderer uploads as it is (the one
+    conversion a decoded frame needs anyway, made here, on the thread that decodes)."""
     kept = _KEPT.get(path)
     if kept is not None:
-        return kept
+        return _with_alpha(kept) if alpha else kept
     found = video_frame(path)
     if found is not None:
-        return _read_video_frame(*found)
+        return _read_video_frame(*found, alpha)
     data = Path(path).read_bytes()
     problem, header, pixels = _parsed(data) if check else (None, None, None)
     if problem is not None:
         raise ArsimError(f"{path}: {problem}; give an intact 8-bit PNG file (a recording's frame: record it again)")
     if header is not None and (image := _written_here(header, pixels)) is not None:
-        return image
+        return _with_alpha(image) if alpha else image
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
     if image is None:
         raise ArsimError(f"{path}: cannot be read as an 8-bit image; give 8-bit PNG files (a recording's frame: "
                          "record it again)")
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGBA if alpha else cv2.COLOR_BGR2RGB)
 
 
-def read_frames(paths: Iterable[Path], workers: int = 2, ahead: int = 8, check: bool = True) -> Iterator[np.ndarray]:
-    """read_frame of each path in order, decoded ahead on `workers` threads (the checks and OpenCV's decoding
-    release the GIL, so they overlap the caller's work), at most `ahead` frames held at once."""
+def _with_alpha(rgb: np.ndarray) -> np.ndarray:
+    return cv2.cvtColor(rgb, cv2.COLOR_RGB2RGBA)
+
+
+def read_frames(paths: Iterable[Path], workers: int = 2, ahead: int = 8, check: bool = True,
+                alpha: bool = False) -> Iterator[np.ndarray]:
+    """read_frame of each path in order (alpha: as read_frame's), decoded ahead on `workers` threads (the checks
+    and OpenCV's decoding release the GIL, so they overlap the caller's work), at most `ahead` frames held at once."""
     from concurrent.futures import ThreadPoolExecutor
 
     paths = list(paths)
@@ -409,7 +415,7 @@ def read_frames(paths: Iterable[Path], workers: int = 2, ahead: int = 8, check: 
     pending = collections.deque()
     with ThreadPoolExecutor(workers) as pool:
         for path in paths:
-            pending.append(pool.submit(read_frame, path, check))
+            pending.append(pool.submit(read_frame, path, check, alpha))
             if len(pending) > ahead:
                 yield pending.popleft().result()
         while pending:

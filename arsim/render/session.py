@@ -201,7 +201,8 @@ def run_session(rec: Recording, linear_of_code: np.ndarray, maps: dict[str, MapS
     error_maps = {}  # (frame index, estimator) -> error_map's (or its Future)
     with (atomic_path(out_dir / "session.mp4") as video_path,
           _VideoWriter(video_path, fps, (camera.width, camera.height)) as video):
-        frames = read_frames(rec.folder / rec.frames[k]["file"] for k in indices)  # (decoded ahead of the loop)
+        # (decoded ahead of the loop, as RGBA: the layout step 4 uploads)
+        frames = read_frames((rec.folder / rec.frames[k]["file"] for k in indices), alpha=True)
         for n, (k, frame) in enumerate(zip(indices, frames)):
             time_s = frame_time_s(rec, k)
             pose, record = loop.run(frame, int(k), time_s)
@@ -319,7 +320,7 @@ def run_profile(rec: Recording, linear_of_code: np.ndarray, probe: np.ndarray, o
 
     def camera_frame(k: int) -> np.ndarray:
         if k not in decoded:
-            decoded[k] = read_frame(rec.folder / rec.frames[k]["file"])
+            decoded[k] = read_frame(rec.folder / rec.frames[k]["file"], alpha=True)
         return decoded[k]
 
     loop.warm_up(camera_frame(0), 0, frame_time_s(rec, 0))

@@ -106,7 +106,7 @@ class TagTracker:
         return np.clip(np.round(255 * self.linear / level), 0, 255).astype(np.uint8)
 
     def track(self, frame: np.ndarray, index: int | None = None) -> TagPose:
-        """The tag's pose in an 8-bit RGB or grey frame, or LOST (index: the frame's, for trackers that need
+        """The tag's pose in an 8-bit RGB, RGBA or grey frame, or LOST (index: the frame's, for trackers that need
         it: FusedTracker)."""
         grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
         if self.linearise is None:
