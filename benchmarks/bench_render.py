@@ -13,7 +13,7 @@ two medians per step:
      mesh's coarsest level of detail) with a shader that writes a constant colour (its alpha the mask);
   6  one pass over the same rectangles that copies the HDR colour where it is set (no average, no
      operator);
-  7  the same box blended from a texture already uploaded (no text drawn).
+  7  the same box blended from the text's coverage already uploaded (no text drawn).
 
 And the least shading the thesis allows: the renderer's own steps 4, 6 and 7, with step 5 drawn on the floor's
 geometry by a shader that does only what Alg. 5.1 asks of every pixel, its two angle-map lookups (the
@@ -38,7 +38,7 @@ from arsim.core.resample import to_layout
 from arsim.lighting.fast import fast_maps
 from arsim.lighting.mapset import MapSet
 from arsim.render.content import scene_objects
-from arsim.render.renderer import Renderer, _source, overlay_image
+from arsim.render.renderer import OVERLAY_BOX_ALPHA, Renderer, _source, overlay_coverage
 from arsim.scenario.sections import Scenario
 from arsim.sensors.recording import ar_path
 
@@ -180,8 +180,9 @@ class FloorRenderer(Renderer):
 
     def overlay_pass(self, image: np.ndarray) -> None:
         if self.overlay_program is None:
-            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("overlay.frag", []))
-            texture = self.ctx.texture(image.shape[1::-1], 4, np.ascontiguousarray(image).tobytes(), dtype="f1")
+            program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []),
+                                       fragment_shader=_source("overlay.frag", [f"BOX_ALPHA {OVERLAY_BOX_ALPHA}"]))
+            texture = self.ctx.texture(image.shape[1::-1], 1, np.ascontiguousarray(image).tobytes(), dtype="f1")
             self.overlay_program = (program, self.ctx.vertex_array(program, []), texture)
         program, vao, texture = self.overlay_program
         self.output_fbo.use()
@@ -224,7 +225,7 @@ def main() -> None:
     positions = path.position(t)
     background = np.random.default_rng(0).integers(0, 256, (args.height, args.width, 3), dtype=np.uint8)
     rgba = np.dstack([background, np.full(background.shape[:2], 255, np.uint8)])
-    overlay = overlay_image(["frame 0  16.0 ms", "maps: fast"], args.height)
+    overlay = overlay_coverage(["frame 0  16.0 ms", "maps: fast"], args.height)
     query = ctx.query(time=True)
     names = ("background (4)", "objects (5)", "tone mapping (6)", "overlay (7)")
     warm = 3  # the first frames compile and allocate

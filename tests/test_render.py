@@ -519,3 +519,30 @@ def test_an_rgba_camera_frame_is_the_background_an_rgb_one_is(gl, maps):
     assert (outputs[0] != frame).any()  # (the sphere is drawn over it)
     assert np.array_equal(outputs[0], outputs[1])
 
+
+
+@pytest.mark.parametrize("height", [240, 720])
+def test_the_overlay_drawn_from_its_coverage_is_its_image_blended(gl, maps, height):
+    """Step 7 uploads only the text's coverage and its shader makes overlay_image's colour and alpha from it:
+    the frame is overlay_image blended over it (within one code: GL's blend rounds), nothing outside the box
+    changes."""
+    from arsim.render.renderer import overlay_image
+
+    camera = CameraIntrinsics.from_fov(height * 4 // 3, height, 60.0)
+    lines = ["frame 1234  16.0 ms", "maps: fast; baking accurate 47 %"]
+    frame = np.random.default_rng(height).integers(0, 256, (camera.height, camera.width, 3), dtype=np.uint8)
+    r = Renderer(camera, maps, gl)
+    r.background_pass(frame)
+    r.overlay_pass(lines)
+    out = r.read_output().astype(float)
+    image = overlay_image(lines, height).astype(float)
+    margin, (h, w) = max(height // 90, 2), image.shape[:2]
+    assert r.overlay_box == np.s_[margin:margin + h, margin:margin + w]
+    assert (image[..., 0] > 0).mean() > 0.05  # (text drawn)
+    expected = frame.astype(float)
+    alpha = image[..., 3:] / 255.0
+    expected[r.overlay_box] = image[..., :3] * alpha + expected[r.overlay_box] * (1.0 - alpha)
+    assert np.abs(out - expected).max() <= 1.0
+    outside = np.ones(frame.shape[:2], bool)
+    outside[r.overlay_box] = False
+    assert np.array_equal(out[outside], frame[outside])

@@ -244,9 +244,14 @@ def texel_length(mesh: Mesh, uvs: np.ndarray, texture_size: int) -> float:
     return float(np.median(np.sqrt(world[ok] / uv[ok]))) / texture_size if ok.any() else 0.0
 
 
-def overlay_image(lines: Sequence[str], frame_height: int) -> np.ndarray:
-    """The overlay's text as an RGBA image (h, w, 4) uint8, row 0 at the top: white text (OpenCV's Hershey
-    font, anti-aliased) on a black box at 55 % opacity; sized to the frame's height."""
+# The overlay's box: 55 % opaque where no text covers it (overlay.frag takes the larger of this and the coverage).
+OVERLAY_BOX_ALPHA = 140
+
+
+def overlay_coverage(lines: Sequence[str], frame_height: int) -> np.ndarray:
+    """The overlay's text as its coverage (h, w) uint8, row 0 at the top: white text (OpenCV's Hershey font,
+    anti-aliased) in a box; sized to the frame's height. Step 7 uploads this and overlay.frag makes the colour
+    and alpha of overlay_image from it."""
     scale = max(frame_height / 720.0 * 0.6, 0.35)  # (below 0.35 the Hershey font is not legible)
     thickness = max(int(round(scale * 1.6)), 1)
     sizes = [cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness) for line in lines]
@@ -256,8 +261,14 @@ def overlay_image(lines: Sequence[str], frame_height: int) -> np.ndarray:
     for k, line in enumerate(lines):
         baseline = pad + (k + 1) * line_height - sizes[k][1] - 2
         cv2.putText(coverage, line, (pad, baseline), cv2.FONT_HERSHEY_SIMPLEX, scale, 255, thickness, cv2.LINE_AA)
-    alpha = np.maximum(coverage, 140)
-    return np.dstack([coverage, coverage, coverage, alpha])
+    return coverage
+
+
+def overlay_image(lines: Sequence[str], frame_height: int) -> np.ndarray:
+    """The overlay as an RGBA image (h, w, 4) uint8, row 0 at the top: its text (overlay_coverage) white on a
+    black box at OVERLAY_BOX_ALPHA opacity; what step 7 blends over the frame."""
+    coverage = overlay_coverage(lines, frame_height)
+    return np.dstack([coverage, coverage, coverage, np.maximum(coverage, OVERLAY_BOX_ALPHA)])
 
 
 # Rectangles are merged where their bounding rectangle is at most this many times the area they cover:
@@ -802,20 +813,20 @@ class Renderer:
         the frame's top left, blended over the output; below it, optionally, a thumbnail of an HDR
         angle-map texture (the map being baked: the thesis's progress display, black where no tile is
         done yet), its rows bottom-up (t upwards)."""
-        image = overlay_image(lines, self.camera.height)
-        h, w = image.shape[:2]
+        coverage = overlay_coverage(lines, self.camera.height)  # (a quarter of the RGBA image's bytes to upload)
+        h, w = coverage.shape[:2]
         if self.overlay_program is None:
             programs = {}
-            for name, defines in (("text", []), ("thumbnail", ["THUMBNAIL"])):
+            for name, defines in (("text", [f"BOX_ALPHA {OVERLAY_BOX_ALPHA}"]), ("thumbnail", ["THUMBNAIL"])):
                 program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []), fragment_shader=_source("overlay.frag", defines))
                 programs[name] = (program, self.ctx.vertex_array(program, []))
             self.overlay_program = (programs, {})
         programs, textures = self.overlay_program
         if (w, h) not in textures:
-            textures[(w, h)] = self.ctx.texture((w, h), 4, dtype="f1")
+            textures[(w, h)] = self.ctx.texture((w, h), 1, dtype="f1")
             textures[(w, h)].filter = self.ctx.NEAREST, self.ctx.NEAREST
         texture = textures[(w, h)]
-        texture.write(np.ascontiguousarray(image))  # (the output's rows run from the top: no flip)
+        texture.write(coverage)  # (the output's rows run from the top: no flip)
         margin = max(self.camera.height // 90, 2)
         self.overlay_box = np.s_[margin:margin + h, margin:margin + w]  # in the image, row 0 at the top
         self.output_fbo.use()
