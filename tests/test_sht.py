@@ -104,6 +104,31 @@ def test_sh_bakes_every_low_order_map_in_one_pass_as_map_by_map(bright64, window
         np.testing.assert_array_equal(baked, one_by_one)
 
 
+@pytest.mark.parametrize("n", [2, 8, 64])
+@pytest.mark.parametrize("normalise", [False, True])
+def test_sh_low_orders_are_the_series_at_every_texel(n, normalise):
+    """Up to RINGS_MAX_ORDER the maps come from one pass over the rings and the square grid's symmetry orbits
+    (sh_kernel.orbit_series: each orbit's azimuthal sums once, combined for its up to eight texels): the series
+    evaluated directly at each texel's own direction (sh_evaluate), normalised or not, on maps small enough to
+    have orbits of one, four and eight texels."""
+    from arsim.lighting.sh import RINGS_MAX_ORDER, probe_with_weights
+
+    env = np.random.default_rng(n).random((n, n, 3)) * np.array([1.0, 3.0, 9.0])
+    inside = anglemap_disk_mask(n)
+    exponents = [1, 10, 1280]
+    for order in (1, 4, RINGS_MAX_ORDER):
+        coeffs = sh_coefficients(probe_with_weights(env) if normalise else env, order)
+        kappas = np.stack([phong_zonal_coefficients(s, order) for s in exponents])
+        direct = sh_evaluate(coeffs, kappas, anglemap_directions(n)[inside])
+        if normalise:
+            den = direct[..., 3:]
+            direct = np.divide(direct[..., :3], den, out=np.zeros_like(direct[..., :3]), where=den > 0)
+        maps = sh_maps(env, exponents, order, normalise=normalise)
+        assert np.all(maps[:, ~inside] == 0)
+        for k in range(len(exponents)):
+            np.testing.assert_allclose(maps[k][inside], direct[k], rtol=1e-6, atol=1e-7 * np.abs(direct[k]).max())
+
+
 def test_sh_beyond_the_grid_orders_is_evaluated_at_the_texels():
     n, order = 16, GRID_MAX_ORDER + 8
     env = np.random.default_rng(1).random((n, n, 3))

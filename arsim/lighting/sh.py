@@ -36,7 +36,7 @@ import scipy.fft
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.core.errors import ArsimError
 from arsim.lighting.phong import phong_zonal_coefficients
-from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, project_rings, ring_series
+from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, orbit_series, project_rings
 from arsim.lighting.sht import (alm_bands, alm_from_real, disk_locations, sh_angles, synthesise_at, synthesise_cc_grid,
                                 texel_sums)
 
@@ -46,9 +46,10 @@ MAX_ORDER = 1024
 # per band would not fit in memory).
 DIRECT_MAX_ORDER = 16
 GRID_MAX_ORDER = 512
-# Up to this order the direct evaluation runs per ring of equal polar angle (_evaluate_disk_rings) rather
-# than through ducc0, whose fixed cost per call dominates there (at 512², nine maps: 0.08 s against 0.33 s
-# at order 3, 0.18 s against 0.33 s at order 8, 0.36 s against 0.39 s at order 16).
+# Up to this order the direct evaluation runs per ring of equal polar angle and per orbit of the square grid's
+# symmetry (_evaluate_disk_rings) rather than through ducc0, whose fixed cost per call dominates there (at 512²,
+# nine maps: 0.017 s at order 10 and 0.024 s at order 16, where ducc0 takes about 0.015 s a map and channel).
+# Beyond it the Legendre sums per ring grow as the order squared: 0.07 s at order 32 against the grid's 0.035 s.
 RINGS_MAX_ORDER = DIRECT_MAX_ORDER
 # Above this order, a map whose lobe carries at most DIRECT_BANDS bands (carrying_bands) is evaluated at
 # the texels rather than on the order's grid: at 512², one such synthesis takes 0.05-0.1 s, the grid of
@@ -378,23 +379,26 @@ def carrying_bands(kappa: np.ndarray) -> int:
 
 
 @functools.lru_cache(maxsize=4)
-def _disk_rings(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The distinct polar angles of the disk texels (about N²/16) and, for the texels sorted by ring
-    (by_ring: their row-major indices), where each ring's start (ring_start, rings + 1) and the cosine and
-    sine of their azimuths."""
-    loc = disk_locations(n)
-    theta, ring = np.unique(loc[:, 0], return_inverse=True)
-    by_ring = np.argsort(ring.ravel(), kind="stable")
-    phi = loc[by_ring, 1]
-    ring_start = np.searchsorted(ring.ravel()[by_ring], np.arange(theta.size + 1))
-    return theta, ring_start, np.cos(phi), np.sin(phi), by_ring
+def _orbit_layout(n: int) -> tuple[np.ndarray, ...]:
+    """The disk texels as sh_kernel.orbit_series walks them (_Orbits): each ring's first orbit (rings + 1), the
+    cosine and sine of the orbits' angles, each orbit's first texel (orbits + 1), and per texel, grouped by orbit,
+    its index in the N x N map (row-major), sigma and quarter turns k."""
+    orbits = _Orbits.of(n)
+    by_orbit = np.argsort(orbits.texel_orbit, kind="stable")
+    orbit_texels = np.searchsorted(orbits.texel_orbit[by_orbit], np.arange(orbits.alpha.size + 1))
+    out = (np.r_[orbits.ring_starts, orbits.alpha.size], np.cos(orbits.alpha), np.sin(orbits.alpha), orbit_texels,
+           np.flatnonzero(anglemap_disk_mask(n))[by_orbit], orbits.texel_sigma[by_orbit].astype(np.float64), orbits.texel_k[by_orbit])
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 @functools.lru_cache(maxsize=2)
 def _ring_legendre(n: int, order: int) -> np.ndarray:
-    """The orthonormal P_lm at the rings' polar angles, (rings, order (order + 1) / 2) packed m by m as
-    _lm_packing gives (kept: bakes map by map reuse it; 17 MB at order 16, 512²)."""
-    out = np.ascontiguousarray(np.concatenate([p.T for _, p in _Legendre(_disk_rings(n)[0], order, False)], axis=1))
+    """The orthonormal P_lm at the polar angles of the disk's rings (_Orbits: about N²/17 at 512²), (rings,
+    order (order + 1) / 2) packed m by m as _lm_packing gives (kept: bakes map by map reuse it; 16 MB at order
+    16, 512²)."""
+    out = np.ascontiguousarray(np.concatenate([p.T for _, p in _Legendre(_Orbits.of(n).theta, order, False)], axis=1))
     out.setflags(write=False)
     return out
 
@@ -406,24 +410,26 @@ def _lm_packing(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.concatenate([[0], np.cumsum(np.arange(order, 0, -1))]), l, m
 
 
-def _evaluate_disk_rings(coeffs: np.ndarray, kappas: np.ndarray, n: int) -> np.ndarray:
+def _evaluate_disk_rings(coeffs: np.ndarray, kappas: np.ndarray, n: int, maps: np.ndarray, which: list[int],
+                         normalise: bool) -> None:
     """_evaluate_disk for low orders, exactly (up to rounding) and without ducc0's per-call cost (about
-    0.015 s a channel at 512², more than order 64's whole grid): the Legendre sums per ring of equal
-    polar angle, then per texel the azimuthal series, in one compiled pass for all the maps (sh_kernel.ring_series)."""
+    0.015 s a channel at 512², more than order 64's whole grid), written into maps[which] (normalised as sh_maps
+    does): the Legendre sums per ring of equal polar angle, the azimuthal series once per orbit of the square
+    grid's symmetry and combined for each of its up to eight texels, in one compiled pass for all the maps
+    (sh_kernel.orbit_series)."""
     n_maps, order = kappas.shape
-    _, ring_start, cos_phi, sin_phi, by_ring = _disk_rings(n)
+    ring_orbits, cos_alpha, sin_alpha, orbit_texels, texel, sigma, quarter = _orbit_layout(n)
     channels = coeffs.shape[1]
-    legendre = _ring_legendre(n, order)
     first, l, m = _lm_packing(order)
-    scale = np.where(m > 0, np.sqrt(2.0), 1.0)[:, None]
-    out = np.empty((n_maps, by_ring.size, channels))
-    weights = np.empty((n_maps, 2, channels, l.size))  # (E, 2, C, packed lm): the cos and sin terms' factors
-    for e in range(n_maps):
-        weighted = scale * kappas[e, l][:, None]
-        weights[e] = np.stack([weighted * coeffs[l * (l + 1) + m],
-                               np.where(m[:, None] > 0, weighted * coeffs[l * (l + 1) - m], 0.0)]).transpose(0, 2, 1)
-    ring_series(legendre, first, weights, ring_start, cos_phi, sin_phi, by_ring, out)  # (every map in one pass)
-    return out
+    scale = np.where(m > 0, np.sqrt(2.0), 1.0)
+    # weights[j, packed lm, (map, channel)]: the cos (j = 0) and sin (1) terms' factors, a column per map and channel
+    weighted = (scale * kappas[:, l])[:, :, None]  # (E, packed lm, 1)
+    weights = np.stack([weighted * coeffs[l * (l + 1) + m][None],
+                        np.where(m[None, :, None] > 0, weighted * coeffs[l * (l + 1) - m][None], 0.0)])
+    weights = np.ascontiguousarray(weights.transpose(0, 2, 1, 3).reshape(2, l.size, n_maps * channels))
+    orbit_series(_ring_legendre(n, order), first, weights, ring_orbits, cos_alpha, sin_alpha, orbit_texels, texel,
+                 sigma, quarter, maps.reshape(maps.shape[0], n * n, 3), np.asarray(which, dtype=np.int64), channels,
+                 normalise)
 
 
 def _evaluate_disk(coeffs: np.ndarray, kappas: np.ndarray, n: int) -> np.ndarray:
@@ -470,7 +476,8 @@ def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[i
         elif faithful and o <= DIRECT_MAX_ORDER:
             all_values = sh_evaluate(coeffs[: o * o], kappas, anglemap_directions(n)[inside], faithful)
         elif not faithful and o <= RINGS_MAX_ORDER:
-            all_values = _evaluate_disk_rings(coeffs, kappas, n)
+            _evaluate_disk_rings(coeffs, kappas, n, maps, which, normalise)  # (into the maps: no scatter after)
+            continue
         elif not faithful and (o <= DIRECT_MAX_ORDER or o > GRID_MAX_ORDER):
             all_values = _evaluate_disk(coeffs, kappas, n)
         else:

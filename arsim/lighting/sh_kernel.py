@@ -208,49 +208,87 @@ def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den): 
 
 
 @numba.njit(parallel=True, cache=True, fastmath=True)
-def ring_series(legendre, first, weights, ring_start, cos_phi, sin_phi, texel, out):  # pragma: no cover (compiled)
-    """The low-order SH series of E maps at the texels, ring by ring of equal polar angle. Per ring r and map e,
-    its Legendre sums radial[e, j, c, m] = sum_l legendre[r, first[m] + l - m] weights[e, j, c, first[m] + l - m]
-    (j = 0: the cos term of m, 1: the sin term), kept in a small buffer; then per texel k of the ring (texels
-    sorted by ring, ring r's from ring_start[r] to ring_start[r + 1]) out[e, texel[k], c] = sum_m
-    radial[e, 0, c, m] cos(m phi_k) + radial[e, 1, c, m] sin(m phi_k), cos and sin of m phi by the
-    angle-addition recurrence. legendre (rings, order (order + 1) / 2): the orthonormal P_lm packed m by m
-    (first[m]: where m's start). Every map in one pass: a ring's Legendre row is read once and its texels'
-    recurrence runs once for all of them (nine maps at order 16: 0.10 s against 0.16-0.18 s map by map)."""
+def orbit_series(legendre, first, weights, ring_orbits, cos_alpha, sin_alpha, orbit_texels, texel, sigma, quarter,
+                 maps, which, channels, normalise):  # pragma: no cover (compiled)
+    """The low-order SH series of several maps and channels (a column each: W of them) at the disk texels,
+    ring by ring of equal polar angle and, within a ring, orbit by orbit of the square grid's symmetry
+    (sh._Orbits).
+
+    Per ring r, its Legendre sums A[m, x] = sum_l legendre[r, first[m] + l - m] weights[0, first[m] + l - m, x]
+    (the cos terms of m) and B[m, x] from weights[1] (the sin terms); legendre (rings, order (order + 1) / 2)
+    holds the orthonormal P_lm packed m by m (first[m]: where m's start), and the columns x run innermost, in
+    vector lanes. A texel's value is sum_m A_m cos(m phi) + B_m sin(m phi) = Re sum_m (A_m - i B_m) e^{i m phi},
+    and its azimuth is phi = sigma alpha + k pi / 2 with alpha its orbit's angle: e^{i m phi} = (cos m alpha +
+    i sigma sin m alpha) i^(m k). So each orbit sums, per class q = m mod 4, P = sum A cos, Q = sum B sin,
+    R = sum A sin and T = sum B cos once (cos and sin of m alpha by the angle-addition recurrence), and each of its
+    up to eight texels combines them: with U_q = P_q + sigma Q_q and V_q = T_q - sigma R_q, the value is
+    U_0 + U_1 + U_2 + U_3 (k = 0), U_0 + V_1 - U_2 - V_3 (1), U_0 - U_1 + U_2 - U_3 (2) or U_0 - V_1 - U_2 + V_3 (3).
+    Orbits ring_orbits[r] .. ring_orbits[r + 1] - 1 make ring r; texels orbit_texels[o] .. orbit_texels[o + 1] - 1
+    (texel[j]: its index in the N x N map, sigma[j] = +-1, quarter[j] = k) make orbit o.
+
+    The columns are the maps' channels, map e's from e C (with normalise, the fourth is the lobe's sum of the
+    texel weights, which divides the first three, 0 where it is not positive); a texel's first three values go
+    straight into maps[which[e], texel[j]] (float32, the (E, N * N, 3) maps), as sh.sh_maps would write them."""
     order = first.size - 1
-    n_maps, _, channels, _ = weights.shape
-    for r in numba.prange(ring_start.size - 1):
-        radial = np.empty((n_maps, 2, channels, order))
+    width = weights.shape[2]
+    for r in numba.prange(ring_orbits.size - 1):
+        radial = np.zeros((2, order, width))
         row = legendre[r]
-        for e in range(n_maps):
-            for j in range(2):
-                for c in range(channels):
-                    w = weights[e, j, c]
-                    for m in range(order):
-                        total = 0.0
-                        for i in range(first[m], first[m + 1]):
-                            total += row[i] * w[i]
-                        radial[e, j, c, m] = total
-        # The ring's texels side by side (m outermost): each step of the recurrence and of the sums runs over
-        # them at once, in vector lanes, rather than as a chain of dependent steps per texel.
-        k0, k1 = ring_start[r], ring_start[r + 1]
-        count = k1 - k0
-        c1, s1 = cos_phi[k0:k1], sin_phi[k0:k1]
-        cos_m, sin_m = np.ones(count), np.zeros(count)
-        totals = np.zeros((n_maps, channels, count))
-        for m in range(order):
-            if m > 0:
-                for i in range(count):
-                    cos_next = cos_m[i] * c1[i] - sin_m[i] * s1[i]
-                    sin_m[i] = sin_m[i] * c1[i] + cos_m[i] * s1[i]
-                    cos_m[i] = cos_next
-            for e in range(n_maps):
-                for c in range(channels):
-                    a, b = radial[e, 0, c, m], radial[e, 1, c, m]
-                    t = totals[e, c]
-                    for i in range(count):
-                        t[i] += a * cos_m[i] + b * sin_m[i]
-        for e in range(n_maps):
-            for i in range(count):
-                for c in range(channels):
-                    out[e, texel[k0 + i], c] = totals[e, c, i]
+        for j in range(2):
+            for m in range(order):
+                target = radial[j, m]
+                for i in range(first[m], first[m + 1]):
+                    p = row[i]
+                    w = weights[j, i]
+                    for x in range(width):
+                        target[x] += p * w[x]
+        sums = np.empty((4, 4, width))  # [q, (P, Q, R, T), x]
+        combined = np.empty((2, 2, 4, width))  # [sigma +1 / -1, (U, V), q, x]
+        target = np.empty(width)
+        for o in range(ring_orbits[r], ring_orbits[r + 1]):
+            sums[:] = 0.0
+            c1, s1 = cos_alpha[o], sin_alpha[o]
+            cos_m, sin_m = 1.0, 0.0
+            for m in range(order):
+                if m > 0:
+                    cos_m, sin_m = cos_m * c1 - sin_m * s1, sin_m * c1 + cos_m * s1
+                q = m & 3
+                a, b = radial[0, m], radial[1, m]
+                p_, q_, r_, t_ = sums[q, 0], sums[q, 1], sums[q, 2], sums[q, 3]
+                for x in range(width):
+                    p_[x] += a[x] * cos_m
+                    q_[x] += b[x] * sin_m
+                    r_[x] += a[x] * sin_m
+                    t_[x] += b[x] * cos_m
+            for q in range(4):
+                for x in range(width):
+                    combined[0, 0, q, x] = sums[q, 0, x] + sums[q, 1, x]
+                    combined[0, 1, q, x] = sums[q, 3, x] - sums[q, 2, x]
+                    combined[1, 0, q, x] = sums[q, 0, x] - sums[q, 1, x]
+                    combined[1, 1, q, x] = sums[q, 3, x] + sums[q, 2, x]
+            for j in range(orbit_texels[o], orbit_texels[o + 1]):
+                u = combined[0 if sigma[j] > 0 else 1, 0]
+                v = combined[0 if sigma[j] > 0 else 1, 1]
+                turn = quarter[j]
+                if turn == 0:
+                    for x in range(width):
+                        target[x] = u[0, x] + u[1, x] + u[2, x] + u[3, x]
+                elif turn == 1:
+                    for x in range(width):
+                        target[x] = u[0, x] + v[1, x] - u[2, x] - v[3, x]
+                elif turn == 2:
+                    for x in range(width):
+                        target[x] = u[0, x] - u[1, x] + u[2, x] - u[3, x]
+                else:
+                    for x in range(width):
+                        target[x] = u[0, x] - v[1, x] - u[2, x] + v[3, x]
+                pixel = texel[j]
+                for e in range(which.size):
+                    base = e * channels
+                    if normalise:
+                        den = target[base + 3]
+                        for c in range(3):
+                            maps[which[e], pixel, c] = target[base + c] / den if den > 0.0 else 0.0
+                    else:
+                        for c in range(3):
+                            maps[which[e], pixel, c] = target[base + c]
