@@ -250,7 +250,7 @@ def transforms(names) -> None:
         for k, (s, bands, size) in enumerate(grids(lmax)):
             a = sht.zonal_scale(alm[:, (l < bands) & (m < bands)], phong_zonal_coefficients(s, bands)).astype(np.complex128)
             grid = np.stack([plan(bands - 1, *size).synth(c) for c in a]).astype(np.float32)
-            cubic_lookup_into(out[k].reshape(n * n, 3), sht._disk_index(n), grid.reshape(3, -1), *size,
+            cubic_lookup_into(out[k].reshape(n * n, 3), sht.disk_index(n), grid.reshape(3, -1), *size,
                               *sht.grid_coordinates(n, *size), sht._weight_map(n, float(s), bands))
         return out
 

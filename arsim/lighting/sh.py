@@ -37,7 +37,7 @@ from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, angl
 from arsim.core.errors import ArsimError
 from arsim.lighting.phong import phong_zonal_coefficients
 from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, orbit_series, project_rings
-from arsim.lighting.sht import (alm_bands, alm_from_real, disk_locations, sh_angles, synthesise_at, synthesise_cc_grid,
+from arsim.lighting.sht import (alm_bands, alm_from_real, disk_index, disk_locations, sh_angles, synthesise_at, synthesise_cc_grid,
                                 texel_sums)
 
 MAX_ORDER = 1024
@@ -485,9 +485,10 @@ def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[i
             sampler = _disk_sampler(n, *size)
             all_values = np.stack([lookup_channels(grid.reshape(grid.shape[0], -1), sampler.index, sampler.weight)
                                    for grid in sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful)])
+        flat = maps.reshape(len(exponents), n * n, 3)
         for values, k in zip(all_values, which):
             if normalise:
                 den = values[:, 3:]
                 values = np.divide(values[:, :3], den, out=np.zeros_like(values[:, :3]), where=den > 0)
-            maps[k][inside] = values
+            flat[k, disk_index(n)] = values
     return maps

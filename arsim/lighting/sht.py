@@ -199,7 +199,9 @@ def _solid_angles(n: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def _disk_index(n: int) -> np.ndarray:
+def disk_index(n: int) -> np.ndarray:
+    """The disk texels' indices in an N x N map, row-major (kept): writing a map's disk through them is
+    about twice as fast as through the boolean mask."""
     index = np.flatnonzero(_disk_mask(n))
     index.setflags(write=False)
     return index
@@ -261,7 +263,7 @@ def sht_map(env: np.ndarray, prepared: tuple[np.ndarray, int], exponent: float, 
     if out is None:
         out = np.zeros((n, n, 3), dtype=np.float32)
     _lobe_lookup(alm, lmax, exponent, bands, functools.partial(grid_coordinates, n), out.reshape(n * n, 3),
-                 _disk_index(n), _weight_map(n, float(exponent), bands))
+                 disk_index(n), _weight_map(n, float(exponent), bands))
     return out
 
 
@@ -372,7 +374,7 @@ def sht_maps_from_source(source: np.ndarray, n: int, exponents: Sequence[float])
         coordinates = functools.partial(_equirect_frame_coordinates, n)
         for k, s in enumerate(exponents):
             bands = bands_for_exponent(s)
-            _lobe_lookup(alm, lmax, s, bands, coordinates, maps[k], _disk_index(n), _equirect_weight_map(h, n, float(s), bands))
+            _lobe_lookup(alm, lmax, s, bands, coordinates, maps[k], disk_index(n), _equirect_weight_map(h, n, float(s), bands))
         return maps.reshape(len(exponents), n, n, 3)
     # an angle map: its radiance and its texel weights (a channel of ones), summed over its disk texels
     alm = texel_sums_alm(np.concatenate([np.asarray(source)[..., :3], np.ones(source.shape[:2] + (1,))], axis=-1),
@@ -383,5 +385,5 @@ def sht_maps_from_source(source: np.ndarray, n: int, exponents: Sequence[float])
         bands = bands_for_exponent(s)
         den = np.zeros((count, 1))
         _lobe_lookup(alm[3:], lmax, s, bands, coordinates, den, np.arange(count), np.ones(count))
-        _lobe_lookup(alm[:3], lmax, s, bands, coordinates, maps[k], _disk_index(n), den[:, 0])
+        _lobe_lookup(alm[:3], lmax, s, bands, coordinates, maps[k], disk_index(n), den[:, 0])
     return maps.reshape(len(exponents), n, n, 3)
