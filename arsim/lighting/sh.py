@@ -36,7 +36,7 @@ import scipy.fft
 from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
 from arsim.core.errors import ArsimError
 from arsim.lighting.phong import phong_zonal_coefficients
-from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels, orbit_series, project_rings
+from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels_into, orbit_series, project_rings
 from arsim.lighting.sht import (alm_bands, alm_from_real, disk_index, disk_locations, sh_angles, synthesise_at, synthesise_cc_grid,
                                 texel_sums)
 
@@ -483,8 +483,10 @@ def sh_maps(env: np.ndarray, exponents: Sequence[float], order: int | Sequence[i
         else:
             size = synthesis_grid_size(o)
             sampler = _disk_sampler(n, *size)
-            all_values = np.stack([lookup_channels(grid.reshape(grid.shape[0], -1), sampler.index, sampler.weight)
-                                   for grid in sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful)])
+            for grid, k in zip(sh_synthesis_grid(coeffs[: o * o], kappas, *size, faithful=faithful), which):
+                lookup_channels_into(maps.reshape(len(exponents), n * n, 3), k, disk_index(n),
+                                     grid.reshape(grid.shape[0], -1), sampler.index, sampler.weight, normalise)
+            continue
         flat = maps.reshape(len(exponents), n * n, 3)
         for values, k in zip(all_values, which):
             if normalise:

@@ -132,18 +132,29 @@ def bilinear_lookup(texels, index, weight):  # pragma: no cover (compiled)
 
 
 @numba.njit(parallel=True, cache=True)
-def lookup_channels(grid, index, weight):  # pragma: no cover (compiled)
-    """(K, C): sum over the four corners j of weight[k, j] grid[c, index[k, j]], grid being (C, P) (each
-    channel's plane as ducc0 writes it, no transpose)."""
-    channels = grid.shape[0]
-    out = np.empty((index.shape[0], channels))
+def lookup_channels_into(maps, which, texel, grid, index, weight, normalise):  # pragma: no cover (compiled)
+    """maps[which, texel[k], c] = sum over the four corners j of weight[k, j] grid[c, index[k, j]] for c < 3, grid
+    being (C, P) (each channel's plane as ducc0 writes it, no transpose); with normalise divided by the same sum
+    of its fourth channel (0 where that is not positive), as sh.sh_maps normalises. Straight into the (E, N * N,
+    3) float32 maps: no (K, C) values stacked and scattered after."""
     for k in numba.prange(index.shape[0]):
-        for ch in range(channels):
-            v = 0.0
-            for j in range(4):
-                v += weight[k, j] * grid[ch, index[k, j]]
-            out[k, ch] = v
-    return out
+        v0 = v1 = v2 = v3 = 0.0
+        for j in range(4):
+            w, q = weight[k, j], index[k, j]
+            v0 += w * grid[0, q]
+            v1 += w * grid[1, q]
+            v2 += w * grid[2, q]
+            if normalise:
+                v3 += w * grid[3, q]
+        t = texel[k]
+        if normalise:
+            maps[which, t, 0] = v0 / v3 if v3 > 0.0 else 0.0
+            maps[which, t, 1] = v1 / v3 if v3 > 0.0 else 0.0
+            maps[which, t, 2] = v2 / v3 if v3 > 0.0 else 0.0
+        else:
+            maps[which, t, 0] = v0
+            maps[which, t, 1] = v1
+            maps[which, t, 2] = v2
 
 
 @numba.njit(inline="always")
