@@ -5,15 +5,16 @@ phi = atan2(d_y, -d_x) (the thesis's u = 1 - 2s, v = 2t - 1). Real SH with the C
 (eq. 2.27); coefficients are stored as the thesis does, index l(l+1)+m, order o = bands 0..o-1.
 
 Coefficients: c_lm = sum_i L_i Y_lm(w_i) W_i over the disk texels with their solid angles W_i
-(Alg. 4.4/4.5), computed by ducc0's adjoint non-uniform SH transform (sht.texel_sums, 1e-12 relative).
-The ring sums that preceded it stay as its reference: texels at the same disk radius share theta, so the
-Legendre functions are evaluated once per distinct radius (about N^2/8 of them) and the azimuthal sums
-per ring (NumPy here; compiled in sh_kernel.project_rings).
+(Alg. 4.4/4.5), computed by ducc0's adjoint non-uniform SH transform (sht.texel_sums, 1e-12 relative)
+above RINGS_MAX_ORDER, and up to it by the ring sums (compiled: sh_kernel.orbit_partials and project_rings,
+without ducc0's fixed cost per call), whose NumPy version is the reference: texels at the same disk radius
+share theta, so the Legendre functions are evaluated once per distinct radius (about N^2/17 of them) and the
+azimuthal sums per ring, from each symmetry orbit's partial sums (_Orbits).
 
 Maps: M_s = sum_l kappa_l(s) w_l sum_m c_lm Y_lm (eq. 2.31, 2.33; w_l a window, 1 for plain truncation)
 is evaluated exactly at the texels up to DIRECT_MAX_ORDER and beyond GRID_MAX_ORDER (ducc0's
-non-uniform synthesis; up to RINGS_MAX_ORDER per ring of equal polar angle instead), and between them synthesised by ducc0 on a fine (theta, phi) grid and sampled
-bilinearly at the texel directions, as it always was -- except, above GRID_SPARED_FROM, lobes that carry
+non-uniform synthesis; up to RINGS_MAX_ORDER per ring of equal polar angle and per symmetry orbit instead),
+and between them synthesised by ducc0 on a fine (theta, phi) grid and sampled bilinearly at the texel directions, as it always was -- except, above GRID_SPARED_FROM, lobes that carry
 few bands (evaluated at the texels). Every synthesis stops at the last band whose zonal factor is above
 BAND_NEGLIGIBLE (carrying_bands): what the narrow lobes leave out at high orders.
 
@@ -33,12 +34,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft
 
-from arsim.core.conventions import anglemap_directions, anglemap_disk_mask, anglemap_solid_angles
+from arsim.core.conventions import anglemap_directions, anglemap_disk_mask
 from arsim.core.errors import ArsimError
 from arsim.lighting.phong import phong_zonal_coefficients
-from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels_into, orbit_series, project_rings
-from arsim.lighting.sht import (alm_bands, alm_from_real, disk_index, disk_locations, sh_angles, synthesise_at, synthesise_cc_grid,
-                                texel_sums)
+from arsim.lighting.sh_kernel import bilinear_lookup, lookup_channels_into, orbit_partials, orbit_series, project_rings
+from arsim.lighting.sht import (alm_bands, alm_from_real, disk_index, disk_locations, disk_solid_angles, sh_angles,
+                                synthesise_at, synthesise_cc_grid, texel_sums)
 
 MAX_ORDER = 1024
 # Up to this order the maps are evaluated directly at every texel (exact); up to GRID_MAX_ORDER through a
@@ -201,34 +202,45 @@ class _Orbits:
         return cls(theta, ring_starts, alpha, texel_orbit, sigma, k)
 
 
+@functools.lru_cache(maxsize=4)
+def _orbits(n: int) -> _Orbits:
+    return _Orbits.of(n)
+
+
 def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False, compiled: bool = True) -> np.ndarray:
     """SH coefficients (order^2, C) of an angle map (N, N, C), summed over its disk texels with their
-    solid angles: through ducc0's adjoint non-uniform SH transform (sht.texel_sums, to 1e-12 relative).
-    compiled=False runs the same sums in NumPy (the reference); faithful, the thesis's factorials."""
-    if compiled and not faithful:
+    solid angles: through ducc0's adjoint non-uniform SH transform (sht.texel_sums, to 1e-12 relative), and up to
+    RINGS_MAX_ORDER per ring and symmetry orbit, compiled (the same sums to rounding, without ducc0's fixed cost
+    per call: at 512², 3-6 ms against 20 ms). compiled=False runs the ring sums in NumPy (the reference);
+    faithful, the thesis's factorials."""
+    if compiled and not faithful and order > RINGS_MAX_ORDER:
         return texel_sums(env, order)
     return _sh_coefficients_rings(env, order, faithful, compiled)
 
 
 def _sh_coefficients_rings(env: np.ndarray, order: int, faithful: bool = False, compiled: bool = True) -> np.ndarray:
-    """The texel sums per ring of equal disk radius and per symmetry orbit (the NumPy reference, the
-    faithful route, and with compiled=True the numba kernel that preceded ducc0's transform)."""
+    """The texel sums per ring of equal disk radius and per symmetry orbit: compiled (sh_kernel.orbit_partials
+    and project_rings), or NumPy (the reference, and the faithful route)."""
     n = env.shape[0]
-    orbits = _Orbits.of(n)
-    inside = anglemap_disk_mask(n)
-    lw = env[inside].astype(np.float64) * anglemap_solid_angles(n)[inside][:, None]
-    # Per orbit, per sigma and per r = m mod 4: sum of L W i^(r k).
+    orbits = _orbits(n)
     n_orbits = orbits.alpha.size
+    inside = anglemap_disk_mask(n)
+    lw = env[inside].astype(np.float64) * disk_solid_angles(n)[:, None]
+    if not faithful and compiled:
+        _, _, _, orbit_texels, rows, _, sigma, quarter = _orbit_layout(n)
+        partial = orbit_partials(lw, orbit_texels, rows, sigma, quarter)
+    else:
+        # Per orbit, per sigma and per r = m mod 4: sum of L W i^(r k).
+        partial = np.zeros((2, 4, n_orbits, lw.shape[1]), dtype=np.complex128)
+        for r in range(4):
+            phase = (1j) ** ((r * orbits.texel_k) % 4)  # i^(m k) depends on m only through m mod 4
+            for side, sign in enumerate((1, -1)):
+                sel = orbits.texel_sigma == sign
+                for ch in range(lw.shape[1]):
+                    weights = lw[sel, ch] * phase[sel]
+                    partial[side, r, :, ch] = (np.bincount(orbits.texel_orbit[sel], weights.real, n_orbits)
+                                               + 1j * np.bincount(orbits.texel_orbit[sel], weights.imag, n_orbits))
     channels = lw.shape[1]
-    partial = np.zeros((2, 4, n_orbits, channels), dtype=np.complex128)
-    for r in range(4):
-        phase = (1j) ** ((r * orbits.texel_k) % 4)  # i^(m k) depends on m only through m mod 4
-        for side, sign in enumerate((1, -1)):
-            sel = orbits.texel_sigma == sign
-            for ch in range(channels):
-                weights = lw[sel, ch] * phase[sel]
-                partial[side, r, :, ch] = (np.bincount(orbits.texel_orbit[sel], weights.real, n_orbits)
-                                           + 1j * np.bincount(orbits.texel_orbit[sel], weights.imag, n_orbits))
     if not faithful and compiled:
         ring_of_orbit = np.repeat(np.arange(orbits.ring_starts.size), np.diff(np.r_[orbits.ring_starts, n_orbits]))
         projected = project_rings(np.cos(orbits.theta), np.sin(orbits.theta), ring_of_orbit, orbits.alpha,
@@ -382,12 +394,13 @@ def carrying_bands(kappa: np.ndarray) -> int:
 def _orbit_layout(n: int) -> tuple[np.ndarray, ...]:
     """The disk texels as sh_kernel.orbit_series walks them (_Orbits): each ring's first orbit (rings + 1), the
     cosine and sine of the orbits' angles, each orbit's first texel (orbits + 1), and per texel, grouped by orbit,
-    its index in the N x N map (row-major), sigma and quarter turns k."""
-    orbits = _Orbits.of(n)
+    its row among the disk texels and its index in the N x N map (both row-major), sigma and quarter turns k."""
+    orbits = _orbits(n)
     by_orbit = np.argsort(orbits.texel_orbit, kind="stable")
     orbit_texels = np.searchsorted(orbits.texel_orbit[by_orbit], np.arange(orbits.alpha.size + 1))
     out = (np.r_[orbits.ring_starts, orbits.alpha.size], np.cos(orbits.alpha), np.sin(orbits.alpha), orbit_texels,
-           np.flatnonzero(anglemap_disk_mask(n))[by_orbit], orbits.texel_sigma[by_orbit].astype(np.float64), orbits.texel_k[by_orbit])
+           by_orbit, np.flatnonzero(anglemap_disk_mask(n))[by_orbit], orbits.texel_sigma[by_orbit].astype(np.float64),
+           orbits.texel_k[by_orbit])
     for a in out:
         a.setflags(write=False)
     return out
@@ -398,7 +411,7 @@ def _ring_legendre(n: int, order: int) -> np.ndarray:
     """The orthonormal P_lm at the polar angles of the disk's rings (_Orbits: about N²/17 at 512²), (rings,
     order (order + 1) / 2) packed m by m as _lm_packing gives (kept: bakes map by map reuse it; 16 MB at order
     16, 512²)."""
-    out = np.ascontiguousarray(np.concatenate([p.T for _, p in _Legendre(_Orbits.of(n).theta, order, False)], axis=1))
+    out = np.ascontiguousarray(np.concatenate([p.T for _, p in _Legendre(_orbits(n).theta, order, False)], axis=1))
     out.setflags(write=False)
     return out
 
@@ -418,7 +431,7 @@ def _evaluate_disk_rings(coeffs: np.ndarray, kappas: np.ndarray, n: int, maps: n
     grid's symmetry and combined for each of its up to eight texels, in one compiled pass for all the maps
     (sh_kernel.orbit_series)."""
     n_maps, order = kappas.shape
-    ring_orbits, cos_alpha, sin_alpha, orbit_texels, texel, sigma, quarter = _orbit_layout(n)
+    ring_orbits, cos_alpha, sin_alpha, orbit_texels, _, texel, sigma, quarter = _orbit_layout(n)
     channels = coeffs.shape[1]
     first, l, m = _lm_packing(order)
     scale = np.where(m > 0, np.sqrt(2.0), 1.0)

@@ -51,6 +51,35 @@ def _recurrence(m, order):  # pragma: no cover (compiled)
     return ca, cab, pmm_factor, math.sqrt(2.0 * m + 3.0)
 
 
+@numba.njit(parallel=True, cache=True)
+def orbit_partials(lw, orbit_texels, texel, sigma, quarter):  # pragma: no cover (compiled)
+    """(2, 4, O, C) complex: per orbit o, per side (0: sigma = +1, 1: -1) and r = m mod 4, the sum of lw[t] i^(r k)
+    over its texels t with that sigma (k their quarter turns): what sh._sh_coefficients_rings sums with NumPy's
+    bincounts. Texels orbit_texels[o] .. orbit_texels[o + 1] - 1 (texel[j]: the row of lw) make orbit o; each
+    orbit is summed by one thread, its texels in a fixed order, so the sums do not depend on the threads."""
+    n_orbits = orbit_texels.size - 1
+    channels = lw.shape[1]
+    out = np.zeros((2, 4, n_orbits, channels), dtype=np.complex128)
+    for o in numba.prange(n_orbits):
+        for j in range(orbit_texels[o], orbit_texels[o + 1]):
+            side = 0 if sigma[j] > 0 else 1
+            k = quarter[j]
+            t = texel[j]
+            for r in range(4):
+                turn = (r * k) % 4  # i^turn: 1, i, -1, -i
+                for ch in range(channels):
+                    v = lw[t, ch]
+                    if turn == 0:
+                        out[side, r, o, ch] += v
+                    elif turn == 1:
+                        out[side, r, o, ch] += 1j * v
+                    elif turn == 2:
+                        out[side, r, o, ch] -= v
+                    else:
+                        out[side, r, o, ch] -= 1j * v
+    return out
+
+
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def project_rings(cos_theta, sin_theta, ring_of_orbit, alpha, partial, order):  # pragma: no cover (compiled)
     """(order, order, 2C) array: [m, l] holds sum over rings of P~_lm(theta_r) S_m(r), real and imaginary
@@ -242,64 +271,67 @@ def orbit_series(legendre, first, weights, ring_orbits, cos_alpha, sin_alpha, or
     straight into maps[which[e], texel[j]] (float32, the (E, N * N, 3) maps), as sh.sh_maps would write them."""
     order = first.size - 1
     width = weights.shape[2]
-    for r in numba.prange(ring_orbits.size - 1):
-        radial = np.zeros((2, order, width))
-        row = legendre[r]
-        for j in range(2):
-            for m in range(order):
-                target = radial[j, m]
-                for i in range(first[m], first[m + 1]):
-                    p = row[i]
-                    w = weights[j, i]
-                    for x in range(width):
-                        target[x] += p * w[x]
+    n_rings = ring_orbits.size - 1
+    chunks = min(n_rings, 256)  # (each chunk of rings allocates its buffers once)
+    for chunk in numba.prange(chunks):
+        radial = np.empty((2, order, width))
         sums = np.empty((4, 4, width))  # [q, (P, Q, R, T), x]
         combined = np.empty((2, 2, 4, width))  # [sigma +1 / -1, (U, V), q, x]
         target = np.empty(width)
-        for o in range(ring_orbits[r], ring_orbits[r + 1]):
-            sums[:] = 0.0
-            c1, s1 = cos_alpha[o], sin_alpha[o]
-            cos_m, sin_m = 1.0, 0.0
-            for m in range(order):
-                if m > 0:
-                    cos_m, sin_m = cos_m * c1 - sin_m * s1, sin_m * c1 + cos_m * s1
-                q = m & 3
-                a, b = radial[0, m], radial[1, m]
-                p_, q_, r_, t_ = sums[q, 0], sums[q, 1], sums[q, 2], sums[q, 3]
-                for x in range(width):
-                    p_[x] += a[x] * cos_m
-                    q_[x] += b[x] * sin_m
-                    r_[x] += a[x] * sin_m
-                    t_[x] += b[x] * cos_m
-            for q in range(4):
-                for x in range(width):
-                    combined[0, 0, q, x] = sums[q, 0, x] + sums[q, 1, x]
-                    combined[0, 1, q, x] = sums[q, 3, x] - sums[q, 2, x]
-                    combined[1, 0, q, x] = sums[q, 0, x] - sums[q, 1, x]
-                    combined[1, 1, q, x] = sums[q, 3, x] + sums[q, 2, x]
-            for j in range(orbit_texels[o], orbit_texels[o + 1]):
-                u = combined[0 if sigma[j] > 0 else 1, 0]
-                v = combined[0 if sigma[j] > 0 else 1, 1]
-                turn = quarter[j]
-                if turn == 0:
+        for r in range(chunk * n_rings // chunks, (chunk + 1) * n_rings // chunks):
+            radial[:] = 0.0
+            for j in range(2):
+                for m in range(order):
+                    for i in range(first[m], first[m + 1]):
+                        p = legendre[r, i]
+                        for x in range(width):
+                            radial[j, m, x] += p * weights[j, i, x]
+            for o in range(ring_orbits[r], ring_orbits[r + 1]):
+                sums[:] = 0.0
+                c1, s1 = cos_alpha[o], sin_alpha[o]
+                cos_m, sin_m = 1.0, 0.0
+                for m in range(order):
+                    if m > 0:
+                        cos_m, sin_m = cos_m * c1 - sin_m * s1, sin_m * c1 + cos_m * s1
+                    q = m & 3
                     for x in range(width):
-                        target[x] = u[0, x] + u[1, x] + u[2, x] + u[3, x]
-                elif turn == 1:
+                        a, b = radial[0, m, x], radial[1, m, x]
+                        sums[q, 0, x] += a * cos_m
+                        sums[q, 1, x] += b * sin_m
+                        sums[q, 2, x] += a * sin_m
+                        sums[q, 3, x] += b * cos_m
+                for q in range(4):
                     for x in range(width):
-                        target[x] = u[0, x] + v[1, x] - u[2, x] - v[3, x]
-                elif turn == 2:
-                    for x in range(width):
-                        target[x] = u[0, x] - u[1, x] + u[2, x] - u[3, x]
-                else:
-                    for x in range(width):
-                        target[x] = u[0, x] - v[1, x] - u[2, x] + v[3, x]
-                pixel = texel[j]
-                for e in range(which.size):
-                    base = e * channels
-                    if normalise:
-                        den = target[base + 3]
-                        for c in range(3):
-                            maps[which[e], pixel, c] = target[base + c] / den if den > 0.0 else 0.0
+                        combined[0, 0, q, x] = sums[q, 0, x] + sums[q, 1, x]
+                        combined[0, 1, q, x] = sums[q, 3, x] - sums[q, 2, x]
+                        combined[1, 0, q, x] = sums[q, 0, x] - sums[q, 1, x]
+                        combined[1, 1, q, x] = sums[q, 3, x] + sums[q, 2, x]
+                for j in range(orbit_texels[o], orbit_texels[o + 1]):
+                    g = 0 if sigma[j] > 0 else 1
+                    turn = quarter[j]
+                    if turn == 0:
+                        for x in range(width):
+                            target[x] = (combined[g, 0, 0, x] + combined[g, 0, 1, x]
+                                         + combined[g, 0, 2, x] + combined[g, 0, 3, x])
+                    elif turn == 1:
+                        for x in range(width):
+                            target[x] = (combined[g, 0, 0, x] + combined[g, 1, 1, x]
+                                         - combined[g, 0, 2, x] - combined[g, 1, 3, x])
+                    elif turn == 2:
+                        for x in range(width):
+                            target[x] = (combined[g, 0, 0, x] - combined[g, 0, 1, x]
+                                         + combined[g, 0, 2, x] - combined[g, 0, 3, x])
                     else:
-                        for c in range(3):
-                            maps[which[e], pixel, c] = target[base + c]
+                        for x in range(width):
+                            target[x] = (combined[g, 0, 0, x] - combined[g, 1, 1, x]
+                                         - combined[g, 0, 2, x] + combined[g, 1, 3, x])
+                    pixel = texel[j]
+                    for e in range(which.size):
+                        base = e * channels
+                        if normalise:
+                            den = target[base + 3]
+                            for c in range(3):
+                                maps[which[e], pixel, c] = target[base + c] / den if den > 0.0 else 0.0
+                        else:
+                            for c in range(3):
+                                maps[which[e], pixel, c] = target[base + c]

@@ -116,7 +116,7 @@ def texel_sums_alm(env: np.ndarray, lmax: int, epsilon: float = EPSILON) -> np.n
     n = env.shape[0]
     inside = _disk_mask(n)
     dtype = np.float32 if epsilon > 1e-6 else np.float64
-    weighted = (np.asarray(env, dtype=np.float64)[inside] * _solid_angles(n)[:, None]).T.astype(dtype)
+    weighted = (np.asarray(env, dtype=np.float64)[inside] * disk_solid_angles(n)[:, None]).T.astype(dtype)
     return adjoint_at(weighted, disk_locations(n), lmax, epsilon)
 
 
@@ -192,7 +192,8 @@ def sht_prepare(env: np.ndarray, exponents: Sequence[float]) -> tuple[np.ndarray
 
 
 @functools.lru_cache(maxsize=16)
-def _solid_angles(n: int) -> np.ndarray:
+def disk_solid_angles(n: int) -> np.ndarray:
+    """The solid angles of the disk texels of an N x N angle map, row-major (kept per size)."""
     w = anglemap_solid_angles(n)[_disk_mask(n)]
     w.setflags(write=False)
     return w
