@@ -129,6 +129,17 @@ def test_sh_low_orders_are_the_series_at_every_texel(n, normalise):
             np.testing.assert_allclose(maps[k][inside], direct[k], rtol=1e-6, atol=1e-7 * np.abs(direct[k]).max())
 
 
+@pytest.mark.parametrize("order", [4, 40])
+@pytest.mark.parametrize("normalise", [False, True])
+def test_sh_maps_of_a_grey_probe_are_grey(order, normalise):
+    """A one-channel probe gives grey maps: each colour the map of the same values in three channels, on the low
+    orders' orbit pass (4) and on the grid's lookups (40), which both write the maps themselves."""
+    grey = np.random.default_rng(order).random((16, 16, 1)) * 4.0
+    maps = sh_maps(grey, [1, 20], order, normalise=normalise)
+    np.testing.assert_array_equal(maps, sh_maps(np.repeat(grey, 3, axis=2), [1, 20], order, normalise=normalise))
+    assert np.ptp(maps, axis=-1).max() == 0 and np.abs(maps).max() > 0
+
+
 def test_sh_beyond_the_grid_orders_is_evaluated_at_the_texels():
     n, order = 16, GRID_MAX_ORDER + 8
     env = np.random.default_rng(1).random((n, n, 3))

@@ -14,8 +14,9 @@ azimuthal sums per ring, from each symmetry orbit's partial sums (_Orbits).
 Maps: M_s = sum_l kappa_l(s) w_l sum_m c_lm Y_lm (eq. 2.31, 2.33; w_l a window, 1 for plain truncation)
 is evaluated exactly at the texels up to DIRECT_MAX_ORDER and beyond GRID_MAX_ORDER (ducc0's
 non-uniform synthesis; up to RINGS_MAX_ORDER per ring of equal polar angle and per symmetry orbit instead),
-and between them synthesised by ducc0 on a fine (theta, phi) grid and sampled bilinearly at the texel directions, as it always was -- except, above GRID_SPARED_FROM, lobes that carry
-few bands (evaluated at the texels). Every synthesis stops at the last band whose zonal factor is above
+and between them synthesised by ducc0 on a fine (theta, phi) grid and sampled bilinearly at the texel
+directions, as it always was -- except, above GRID_SPARED_FROM, lobes that carry few bands (evaluated at the
+texels). Every synthesis stops at the last band whose zonal factor is above
 BAND_NEGLIGIBLE (carrying_bands): what the narrow lobes leave out at high orders.
 
 Y_lm evaluation: `stable` uses orthonormalised recurrences (no factorials), exact to any order used
@@ -49,7 +50,8 @@ DIRECT_MAX_ORDER = 16
 GRID_MAX_ORDER = 512
 # Up to this order the direct evaluation runs per ring of equal polar angle and per orbit of the square grid's
 # symmetry (_evaluate_disk_rings) rather than through ducc0, whose fixed cost per call dominates there (at 512²,
-# nine maps: 0.017 s at order 10 and 0.024 s at order 16, where ducc0 takes about 0.015 s a map and channel).
+# nine maps: 0.014-0.017 s at order 10 and 0.022-0.024 s at order 16, where ducc0 takes about 0.015 s a map and
+# channel).
 # Beyond it the Legendre sums per ring grow as the order squared: 0.07 s at order 32 against the grid's 0.035 s.
 RINGS_MAX_ORDER = DIRECT_MAX_ORDER
 # Above this order, a map whose lobe carries at most DIRECT_BANDS bands (carrying_bands) is evaluated at
@@ -211,7 +213,7 @@ def sh_coefficients(env: np.ndarray, order: int, faithful: bool = False, compile
     """SH coefficients (order^2, C) of an angle map (N, N, C), summed over its disk texels with their
     solid angles: through ducc0's adjoint non-uniform SH transform (sht.texel_sums, to 1e-12 relative), and up to
     RINGS_MAX_ORDER per ring and symmetry orbit, compiled (the same sums to rounding, without ducc0's fixed cost
-    per call: at 512², 3-6 ms against 20 ms). compiled=False runs the ring sums in NumPy (the reference);
+    per call: at 512², 7-12 ms against 20 ms). compiled=False runs the ring sums in NumPy (the reference);
     faithful, the thesis's factorials."""
     if compiled and not faithful and order > RINGS_MAX_ORDER:
         return texel_sums(env, order)

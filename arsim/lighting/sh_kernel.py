@@ -163,18 +163,21 @@ def bilinear_lookup(texels, index, weight):  # pragma: no cover (compiled)
 @numba.njit(parallel=True, cache=True)
 def lookup_channels_into(maps, which, texel, grid, index, weight, normalise):  # pragma: no cover (compiled)
     """maps[which, texel[k], c] = sum over the four corners j of weight[k, j] grid[c, index[k, j]] for c < 3, grid
-    being (C, P) (each channel's plane as ducc0 writes it, no transpose); with normalise divided by the same sum
-    of its fourth channel (0 where that is not positive), as sh.sh_maps normalises. Straight into the (E, N * N,
+    being (C, P) (each channel's plane as ducc0 writes it, no transpose; one colour channel is read into all three);
+    with normalise divided by the same sum of its last channel (0 where that is not positive), as sh.sh_maps
+    normalises. Straight into the (E, N * N,
     3) float32 maps: no (K, C) values stacked and scattered after."""
+    colour = grid.shape[0] - (1 if normalise else 0)  # (one channel: a grey map, read into all three)
+    c1, c2 = min(1, colour - 1), min(2, colour - 1)
     for k in numba.prange(index.shape[0]):
         v0 = v1 = v2 = v3 = 0.0
         for j in range(4):
             w, q = weight[k, j], index[k, j]
             v0 += w * grid[0, q]
-            v1 += w * grid[1, q]
-            v2 += w * grid[2, q]
+            v1 += w * grid[c1, q]
+            v2 += w * grid[c2, q]
             if normalise:
-                v3 += w * grid[3, q]
+                v3 += w * grid[colour, q]
         t = texel[k]
         if normalise:
             maps[which, t, 0] = v0 / v3 if v3 > 0.0 else 0.0
@@ -266,11 +269,13 @@ def orbit_series(legendre, first, weights, ring_orbits, cos_alpha, sin_alpha, or
     Orbits ring_orbits[r] .. ring_orbits[r + 1] - 1 make ring r; texels orbit_texels[o] .. orbit_texels[o + 1] - 1
     (texel[j]: its index in the N x N map, sigma[j] = +-1, quarter[j] = k) make orbit o.
 
-    The columns are the maps' channels, map e's from e C (with normalise, the fourth is the lobe's sum of the
-    texel weights, which divides the first three, 0 where it is not positive); a texel's first three values go
-    straight into maps[which[e], texel[j]] (float32, the (E, N * N, 3) maps), as sh.sh_maps would write them."""
+    The columns are the maps' channels, map e's from e C (with normalise, the last is the lobe's sum of the
+    texel weights, which divides the others, 0 where it is not positive; one colour channel makes a grey map); a
+    texel's three colours go straight into maps[which[e], texel[j]] (float32, the (E, N * N, 3) maps), as
+    sh.sh_maps would write them."""
     order = first.size - 1
     width = weights.shape[2]
+    colour = channels - (1 if normalise else 0)  # (one channel: a grey map, written into all three)
     n_rings = ring_orbits.size - 1
     chunks = min(n_rings, 256)  # (each chunk of rings allocates its buffers once)
     for chunk in numba.prange(chunks):
@@ -328,10 +333,9 @@ def orbit_series(legendre, first, weights, ring_orbits, cos_alpha, sin_alpha, or
                     pixel = texel[j]
                     for e in range(which.size):
                         base = e * channels
-                        if normalise:
-                            den = target[base + 3]
-                            for c in range(3):
-                                maps[which[e], pixel, c] = target[base + c] / den if den > 0.0 else 0.0
-                        else:
-                            for c in range(3):
-                                maps[which[e], pixel, c] = target[base + c]
+                        for c in range(3):
+                            value = target[base + min(c, colour - 1)]
+                            if normalise:
+                                den = target[base + colour]
+                                value = value / den if den > 0.0 else 0.0
+                            maps[which[e], pixel, c] = value
