@@ -4,6 +4,7 @@
     python benchmarks/bench_sht.py --speed [--assets city]
     python benchmarks/bench_sht.py --transforms [--assets city]   # ducc0 against SHTns (if installed)
     python benchmarks/bench_sht.py --mc-figure benchmarks/results/mc_grids.png   # mc on grids and at every texel
+    python benchmarks/bench_sht.py --speed-figure benchmarks/results/sh_orders_speed.png   # sh's orders and mc, timed
 
 --transforms: the grid syntheses `sht` runs at 512² (each exponent's bandlimit and grid), timed with ducc0 in
 double and single precision and with SHTns (double; built from source with FFTW: `apt-get install
@@ -143,6 +144,53 @@ def wall_and_cpu(repeat, fn):
 SWEEP_ORDERS = [3, 5, 10, 16, 17, 32, 64, 128, 256, 512, 1024]
 
 
+def order_sweep(env: np.ndarray) -> dict[int, float]:
+    """Seconds of `sh` (coefficients and the nine maps) at each of SWEEP_ORDERS, best of 3."""
+    times = {}
+    for order in SWEEP_ORDERS:
+        params = MapParameters(sh_order=order)
+        bake(env, EXPONENTS, "sh", params)  # warm: the order's own tables
+        times[order] = best_of(3, lambda: bake(env, EXPONENTS, "sh", params))
+    return times
+
+
+def speed_figure(path: Path, names) -> None:
+    """`sh`'s time over its orders on each asset against twice order 64's (the no-cliff line), with `mc` at 64
+    samples beside it: seconds, best of 3, the asset's runs one after another."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    fig, axis = plt.subplots(figsize=(7.5, 4.5))
+    for k, name in enumerate(names):
+        env = to_layout(read_hdr(assets_dir() / "envmaps" / f"{name}.exr"), "anglemap", 512)
+        times = order_sweep(env)
+        bake(env, EXPONENTS, "mc", MapParameters(samples=64))
+        mc_s = best_of(3, lambda: bake(env, EXPONENTS, "mc", MapParameters(samples=64)))
+        colour = f"C{k}"
+        axis.plot(list(times), list(times.values()), "o-", color=colour, label=f"sh, {name}")
+        axis.axhline(2 * times[64], color=colour, linestyle=":", linewidth=1)
+        axis.plot([64], [mc_s], "s", color=colour, markersize=8, markerfacecolor="none", label=f"mc, 64 samples, {name}")
+        print(f"{name}: " + ", ".join(f"{o}: {t:.3f}" for o, t in times.items()) + f"; mc {mc_s:.3f} s")
+    axis.set_xscale("log", base=2)
+    axis.set_yscale("log")
+    axis.set_xticks(SWEEP_ORDERS, [str(o) if o != 17 else "" for o in SWEEP_ORDERS])  # (17 beside 16: unlabelled)
+    axis.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    axis.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    axis.set_xlabel("SH order (bands)")
+    axis.set_ylabel("seconds: coefficients + nine 512² maps")
+    axis.set_title("sh over its orders (dotted: twice order 64's time), mc beside order 64", fontsize=10)
+    axis.grid(True, which="both", alpha=0.3)
+    axis.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
 def speed(names, texels: int) -> None:
     """mc at 64 samples against sh at order 64, and sh's time over orders, at 512² (best of 3 each)."""
     for name in names:
@@ -165,11 +213,7 @@ def speed(names, texels: int) -> None:
               f"mean over exponents {np.mean([x.mean_percent for x in e]):.3f}, worst max {max(x.max_percent for x in e):.2f}")
         if name != names[0]:
             continue
-        times = {}
-        for order in SWEEP_ORDERS:
-            params = MapParameters(sh_order=order)
-            bake(env, EXPONENTS, "sh", params)  # warm: the order's own tables
-            times[order] = best_of(3, lambda: bake(env, EXPONENTS, "sh", params))
+        times = order_sweep(env)
         print("  sh by order (nine maps), seconds and ratio to order 64: " + ", ".join(
             f"{o}: {t:.3f} ({t / times[64]:.2f}x)" for o, t in times.items()))
         print(f"  worst ratio {max(times.values()) / times[64]:.2f}x, best {min(times.values()) / times[64]:.2f}x")
@@ -292,9 +336,14 @@ def main() -> None:
     parser.add_argument("--skip-windows", action="store_true", help="skip the window sweep and mc")
     parser.add_argument("--speed", action="store_true", help="only mc against sh at order 64, and sh's order sweep")
     parser.add_argument("--transforms", action="store_true", help="only ducc0 against SHTns on sht's syntheses")
+    parser.add_argument("--speed-figure", type=Path, metavar="PNG",
+                        help="only sh's time over its orders and mc's, per asset, plotted to PNG")
     parser.add_argument("--mc-figure", type=Path, metavar="PNG",
                         help="only mc's maps on grids and at every texel side by side (night), written to PNG")
     args = parser.parse_args()
+    if args.speed_figure:
+        speed_figure(args.speed_figure, args.assets.split(","))
+        return
     if args.mc_figure:
         mc_figure(args.mc_figure)
         return
