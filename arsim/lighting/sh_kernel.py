@@ -1,7 +1,9 @@
-"""Compiled loops of the SH maps: the ring sums times associated Legendre functions for every (l, m) that
-computed `sh_coefficients` before ducc0 (kept as a reference), and the grid lookups of sh.py and sht.py.
+"""Compiled loops of the SH maps: the ring sums times associated Legendre functions for every (l, m), which
+compute `sh_coefficients` up to sh.RINGS_MAX_ORDER (ducc0's adjoint transform beyond), the low orders' series
+at the texels (orbit_series), and the grid lookups of sh.py and sht.py.
 
-Per m, the azimuthal sums of each ring are gathered from its orbits' partial sums, then the orthonormal
+Coefficients: the texels' partial sums per symmetry orbit (orbit_partials); per m, the azimuthal sums of each
+ring are gathered from its orbits' partial sums, then the orthonormal
 Legendre recurrence runs over the rings in blocks small enough for the first-level cache, with the
 projections accumulated as it goes, so that the (order^2/2 x rings) Legendre table is never stored.
 Threads take whole m values (numba prange), large and small m interleaved so the shares are equal.
