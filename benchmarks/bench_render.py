@@ -178,11 +178,11 @@ class FloorRenderer(Renderer):
         self.output_fbo.use()
         self.copy_vao.render(vertices=6 * len(self.rects))
 
-    def overlay_pass(self, image: np.ndarray) -> None:
+    def overlay_pass(self, coverage: np.ndarray) -> None:
         if self.overlay_program is None:
             program = self.ctx.program(vertex_shader=_source("fullscreen.vert", []),
                                        fragment_shader=_source("overlay.frag", [f"BOX_ALPHA {OVERLAY_BOX_ALPHA}"]))
-            texture = self.ctx.texture(image.shape[1::-1], 1, np.ascontiguousarray(image).tobytes(), dtype="f1")
+            texture = self.ctx.texture(coverage.shape[1::-1], 1, np.ascontiguousarray(coverage).tobytes(), dtype="f1")
             self.overlay_program = (program, self.ctx.vertex_array(program, []), texture)
         program, vao, texture = self.overlay_program
         self.output_fbo.use()
@@ -191,7 +191,7 @@ class FloorRenderer(Renderer):
         texture.use(0)
         program["image"].value = 0
         margin = max(self.camera.height // 90, 2)
-        self.output_fbo.viewport = (margin, margin, *image.shape[1::-1])
+        self.output_fbo.viewport = (margin, margin, *coverage.shape[1::-1])
         vao.render(vertices=3)
         self.ctx.disable(self.ctx.BLEND)
         self.output_fbo.viewport = (0, 0, self.camera.width, self.camera.height)

@@ -520,7 +520,6 @@ def test_an_rgba_camera_frame_is_the_background_an_rgb_one_is(gl, maps):
     assert np.array_equal(outputs[0], outputs[1])
 
 
-
 @pytest.mark.parametrize("height", [240, 720])
 def test_the_overlay_drawn_from_its_coverage_is_its_image_blended(gl, maps, height):
     """Step 7 uploads only the text's coverage and its shader makes overlay_image's colour and alpha from it:

@@ -162,13 +162,26 @@ def bilinear_lookup(texels, index, weight):  # pragma: no cover (compiled)
     return out
 
 
+@numba.njit(inline="always")
+def _store_colour(maps, which, pixel, red, green, blue, den, normalise):  # pragma: no cover (compiled)
+    """A texel's colour into the float32 maps (E, N * N, 3) as sh.sh_maps writes it: with normalise divided by den,
+    the lobe's sum of the texel weights (0 where that is not positive)."""
+    if normalise:
+        if den > 0.0:
+            red, green, blue = red / den, green / den, blue / den
+        else:
+            red = green = blue = 0.0
+    maps[which, pixel, 0] = red
+    maps[which, pixel, 1] = green
+    maps[which, pixel, 2] = blue
+
+
 @numba.njit(parallel=True, cache=True)
 def lookup_channels_into(maps, which, texel, grid, index, weight, normalise):  # pragma: no cover (compiled)
     """maps[which, texel[k], c] = sum over the four corners j of weight[k, j] grid[c, index[k, j]] for c < 3, grid
     being (C, P) (each channel's plane as ducc0 writes it, no transpose; one colour channel is read into all three);
-    with normalise divided by the same sum of its last channel (0 where that is not positive), as sh.sh_maps
-    normalises. Straight into the (E, N * N,
-    3) float32 maps: no (K, C) values stacked and scattered after."""
+    with normalise divided by the same sum of its last channel (_store_colour). Straight into the (E, N * N, 3)
+    float32 maps: no (K, C) values stacked and scattered after."""
     colour = grid.shape[0] - (1 if normalise else 0)  # (one channel: a grey map, read into all three)
     c1, c2 = min(1, colour - 1), min(2, colour - 1)
     for k in numba.prange(index.shape[0]):
@@ -180,15 +193,7 @@ def lookup_channels_into(maps, which, texel, grid, index, weight, normalise):  #
             v2 += w * grid[c2, q]
             if normalise:
                 v3 += w * grid[colour, q]
-        t = texel[k]
-        if normalise:
-            maps[which, t, 0] = v0 / v3 if v3 > 0.0 else 0.0
-            maps[which, t, 1] = v1 / v3 if v3 > 0.0 else 0.0
-            maps[which, t, 2] = v2 / v3 if v3 > 0.0 else 0.0
-        else:
-            maps[which, t, 0] = v0
-            maps[which, t, 1] = v1
-            maps[which, t, 2] = v2
+        _store_colour(maps, which, texel[k], v0, v1, v2, v3, normalise)
 
 
 @numba.njit(inline="always")
@@ -272,9 +277,8 @@ def orbit_series(legendre, first, weights, ring_orbits, cos_alpha, sin_alpha, or
     (texel[j]: its index in the N x N map, sigma[j] = +-1, quarter[j] = k) make orbit o.
 
     The columns are the maps' channels, map e's from e C (with normalise, the last is the lobe's sum of the
-    texel weights, which divides the others, 0 where it is not positive; one colour channel makes a grey map); a
-    texel's three colours go straight into maps[which[e], texel[j]] (float32, the (E, N * N, 3) maps), as
-    sh.sh_maps would write them."""
+    texel weights, which divides the others; one colour channel makes a grey map); a texel's three colours go
+    straight into maps[which[e], texel[j]] (_store_colour)."""
     order = first.size - 1
     width = weights.shape[2]
     colour = channels - (1 if normalise else 0)  # (one channel: a grey map, written into all three)
@@ -332,12 +336,7 @@ def orbit_series(legendre, first, weights, ring_orbits, cos_alpha, sin_alpha, or
                         for x in range(width):
                             target[x] = (combined[g, 0, 0, x] - combined[g, 1, 1, x]
                                          - combined[g, 0, 2, x] + combined[g, 1, 3, x])
-                    pixel = texel[j]
                     for e in range(which.size):
                         base = e * channels
-                        for c in range(3):
-                            value = target[base + min(c, colour - 1)]
-                            if normalise:
-                                den = target[base + colour]
-                                value = value / den if den > 0.0 else 0.0
-                            maps[which[e], pixel, c] = value
+                        _store_colour(maps, which[e], texel[j], target[base], target[base + min(1, colour - 1)],
+                                      target[base + min(2, colour - 1)], target[base + channels - 1], normalise)
