@@ -23,6 +23,7 @@ c_lm = sqrt2 Re a_lm, c_l(-m) = -sqrt2 Im a_lm.
 from __future__ import annotations
 
 import functools
+import itertools
 import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -114,22 +115,62 @@ def texel_sums_alm(env: np.ndarray, lmax: int, epsilon: float = EPSILON) -> np.n
     """ducc0 alm (C, nalm) of sum_i L_i conj(Y_lm(w_i)) W_i over the disk texels of an angle map (N, N, C);
     in single precision where epsilon allows it (ducc0: above 1e-6)."""
     n = env.shape[0]
-    inside = _disk_mask(n)
     dtype = np.float32 if epsilon > 1e-6 else np.float64
-    weighted = (np.asarray(env, dtype=np.float64)[inside] * disk_solid_angles(n)[:, None]).T.astype(dtype)
-    return adjoint_at(weighted, disk_locations(n), lmax, epsilon)
+    texels = np.asarray(env, dtype=dtype).reshape(n * n, -1)[disk_index(n)]
+    weighted = (texels * disk_solid_angles(n).astype(dtype)[:, None]).T
+    return adjoint_at(np.ascontiguousarray(weighted), disk_locations(n), lmax, epsilon)
 
 
 def adjoint_at(planes: np.ndarray, loc: np.ndarray, lmax: int, epsilon: float) -> np.ndarray:
-    """ducc0 alm (C, nalm) of sum_i planes[c, i] conj(Y_lm(loc_i)) (ducc0's adjoint non-uniform transform), a
-    channel per thread. Its own threads would share one channel's spreading onto the grid, whose sums then
-    come in an order that depends on their timing: under load the same input gave different last bits."""
-    def one(channel):
-        return _SHT.adjoint_synthesis_general(map=np.ascontiguousarray(channel[None]), spin=0, lmax=lmax, loc=loc,
-                                              epsilon=epsilon, nthreads=1)[0]
+    """ducc0 alm (C, nalm) of sum_i planes[c, i] conj(Y_lm(loc_i)) (ducc0's adjoint non-uniform transform).
+    The planes are laid end to end and cut into a run of points per core (work_runs), each run's pieces
+    transformed one after another on its own thread, and a plane cut in two summed from its pieces in their
+    order: every core busy (three channels on two cores took two rounds of one), and the sums the same
+    whatever the threads' timing. ducc0's own threads would share one transform's spreading onto the grid,
+    whose sums come in an order that depends on their timing: under load the same input gave different last
+    bits."""
+    points = planes.shape[1]
 
-    with ThreadPoolExecutor(max(1, min(len(planes), os.cpu_count() or 1))) as pool:
-        return np.stack(list(pool.map(one, planes)))
+    def run(pieces):
+        return [_SHT.adjoint_synthesis_general(map=np.ascontiguousarray(planes[c, a:b][None]), spin=0, lmax=lmax,
+                                               loc=np.ascontiguousarray(loc[a:b]), epsilon=epsilon, nthreads=1)[0]
+                for c, a, b in pieces]
+
+    runs = work_runs(len(planes), points, os.cpu_count() or 1)
+    results = [result for pieces in _thread_pool().map(run, runs) for result in pieces]
+    out = np.zeros((len(planes), results[0].size), dtype=results[0].dtype)
+    for (c, _, _), result in zip((piece for pieces in runs for piece in pieces), results):
+        out[c] += result  # (a plane's pieces in the order of its points)
+    return out
+
+
+def work_runs(planes: int, points: int, workers: int) -> list[list[tuple[int, int, int]]]:
+    """`planes` of `points` laid end to end and cut into at most `workers` runs of equal length, each run a list of
+    pieces (plane, first point, end): a plane is cut only where a run ends inside it."""
+    total = planes * points
+    bounds = sorted({total * w // workers for w in range(workers + 1)})
+    runs = []
+    for a, b in itertools.pairwise(bounds):
+        pieces = []
+        while a < b:
+            plane, start = divmod(a, points)
+            end = min(points, start + b - a)
+            pieces.append((plane, start, end))
+            a += end - start
+        runs.append(pieces)
+    return runs
+
+
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+
+
+def _thread_pool() -> ThreadPoolExecutor:
+    """A thread per core, kept for the process (starting and joining them cost 2-3 ms a bake); a forked child,
+    whose copy of the pool has no threads, makes its own."""
+    global _POOL
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(os.cpu_count() or 1, thread_name_prefix="arsim-sht"))
+    return _POOL[1]
 
 
 def texel_sums(env: np.ndarray, order: int) -> np.ndarray:
