@@ -315,6 +315,29 @@ def test_texel_sums_are_the_same_bits_while_the_cores_are_busy():
         worker.join()
 
 
+@pytest.mark.parametrize("cores", [1, 2, 3, 5])
+def test_texel_sums_cut_into_a_run_per_core_are_each_channels_whole_transform(monkeypatch, cores):
+    """The channels laid end to end and cut into a run per core (sht.work_runs) cover every texel of every
+    channel once, in runs of equal length; the pieces' sums are each whole channel's transform."""
+    import ducc0
+
+    from arsim.lighting import sht
+
+    runs = sht.work_runs(3, 1000, cores)
+    counts = np.zeros((3, 1000), dtype=int)
+    for c, a, b in (piece for pieces in runs for piece in pieces):
+        counts[c, a:b] += 1
+    lengths = [sum(b - a for _, a, b in pieces) for pieces in runs]
+    assert (counts == 1).all() and len(runs) == cores and max(lengths) - min(lengths) <= 1
+
+    monkeypatch.setattr(sht.os, "cpu_count", lambda: cores)
+    loc = sht.disk_locations(64)
+    planes = np.random.default_rng(0).random((3, len(loc)))
+    whole = np.stack([ducc0.sht.experimental.adjoint_synthesis_general(map=p[None], spin=0, lmax=30, loc=loc,
+                                                                      epsilon=1e-12, nthreads=1)[0] for p in planes])
+    np.testing.assert_allclose(sht.adjoint_at(planes, loc, 30, 1e-12), whole, rtol=0, atol=1e-11 * np.abs(whole).max())
+
+
 def test_equirect_texel_sums_on_its_rings_are_the_sums_over_its_texels():
     """The ring-based transform of an equirect (rows as rings about +y) gives the exact texel sums
     sum_i L_i conj(Y_lm(w_i)) W_i at each texel's direction in that frame (theta = pi v, phi = 2 pi u),
