@@ -22,7 +22,10 @@ normal or light map (a sphere's quad cut to its outline, the normal of the quad'
 mesh's interpolated normal). What the renderer
 spends above it is what its exact surfaces and its light and normal maps cost.
 
-    python benchmarks/bench_render.py [--frames N] [--width W --height H] [--log-average]
+    python benchmarks/bench_render.py [--frames N] [--width W --height H] [--log-average] [--scenario NAME]
+
+--scenario: another scenario's objects (lit from its environment as a session lights them: directional light
+maps, PRT, GGX) along its AR path, instead of the default scenario's; a bundled name or a TOML file.
 """
 
 import argparse
@@ -37,9 +40,10 @@ from arsim.core.hdr_io import read_hdr
 from arsim.core.resample import to_layout
 from arsim.lighting.fast import fast_maps
 from arsim.lighting.mapset import MapSet
-from arsim.render.content import scene_objects
+from arsim.render.content import light_objects, scene_objects
 from arsim.render.renderer import OVERLAY_BOX_ALPHA, Renderer, _source, overlay_coverage
-from arsim.scenario.sections import Scenario
+from arsim.scenario.environment import load_environment
+from arsim.scenario.loader import load_scenario
 from arsim.sensors.recording import ar_path
 
 FLOOR_VERT = """#version 430
@@ -203,13 +207,17 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--height", type=int, default=720)
     parser.add_argument("--log-average", action="store_true", help="tone-map with the log-average (default: [render] log_average)")
+    parser.add_argument("--scenario", help="a bundled scenario's name or a scenario TOML (default: the default scenario)")
     args = parser.parse_args()
 
-    scenario = Scenario()
+    scenario = load_scenario(args.scenario)
     r = scenario.render
     log_average = args.log_average or r.log_average
-    env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", 256)
-    objects = scene_objects(r)
+    if args.scenario is None:
+        env = to_layout(read_hdr(assets_dir() / "envmaps" / "interior.exr"), "anglemap", 256)
+    else:
+        env = to_layout(load_environment(scenario.environment), "anglemap", 256)
+    objects = light_objects(scene_objects(r, scenario.ar.table_albedo), env)
     exponents = sorted({1.0} | {o.material.exponent for o in objects})
     maps = MapSet.of("fast", exponents, fast_maps(env, exponents))
     ctx = create_gl_context()
@@ -256,7 +264,7 @@ def main() -> None:
                 ctx.finish()
                 cpu[which, n, s], gl[which, n, s] = 1000 * (time.perf_counter() - start), query.elapsed / 1e6
     cpu, gl = cpu[:, warm:], gl[:, warm:]
-    print(f"{args.width} x {args.height}, {len(renderer.objects)} objects, {len(t)} frames of the default AR path "
+    print(f"{args.width} x {args.height}, {len(renderer.objects)} objects, {len(t)} frames of the {args.scenario or 'default'} AR path "
           f"({np.linalg.norm(positions, axis=1).min():.2f}-{np.linalg.norm(positions, axis=1).max():.2f} m from the tag), "
           f"log_average {log_average}, ms:")
     print(f"  {'step':20s} {'CPU median':>10s} {'p95':>7s} {'max':>7s}   {'GL median':>9s} {'p95':>7s}   "
