@@ -4,7 +4,7 @@
 a new cache, and the same batch with --no-cache (the time the cache saved). Per run: the wall time and per
 stage computed or reused with its seconds (manifest.json).
 
-    python benchmarks/bench_run_cache.py [SCENARIO] [--work DIR] [--skip-batch]   # default: the embedded default scenario
+    python benchmarks/bench_run_cache.py [SCENARIO] [--seed N] [--work DIR] [--skip-batch]   # default: the embedded default scenario
 """
 
 import argparse
@@ -39,10 +39,13 @@ def main() -> None:
     parser.add_argument("scenario", nargs="?", help="a scenario file or bundled name (default: the embedded default)")
     parser.add_argument("--work", type=Path, help="folder for the runs and caches (default: a new temporary one)")
     parser.add_argument("--skip-batch", action="store_true", help="only the cold, warm and [render] key runs")
+    parser.add_argument("--seed", type=int, help="the scenario with this [run] seed (default: its own)")
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="bench_run_cache."))
     work.mkdir(parents=True, exist_ok=True)
     s = load_scenario(args.scenario)
+    if args.seed is not None:
+        s = dataclasses.replace(s, run=dataclasses.replace(s.run, seed=args.seed))
     variants = {"base": s, "key": dataclasses.replace(s, render=dataclasses.replace(s.render, key=s.render.key * 1.5)),
                 "size": dataclasses.replace(s, render=dataclasses.replace(s.render, map_size=s.render.map_size // 2))}
     for name, v in variants.items():
