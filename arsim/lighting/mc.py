@@ -30,7 +30,7 @@ from arsim.core.errors import ArsimError
 from arsim.core.resample import extend_beyond_rim
 from arsim.lighting.mc_kernel import mc_values
 from arsim.lighting.mipmap import mip_chain, sample_trilinear
-from arsim.lighting.sh_kernel import cubic_lookup_into
+from arsim.lighting.sh_kernel import cubic_lookup_into, rgba_grid
 from arsim.lighting.sht import bands_above, grid_coordinates, grid_directions
 
 CHUNK_SAMPLES = 8192 * 64  # NumPy path: samples at once, texels per chunk x samples per texel
@@ -179,8 +179,10 @@ def mc_maps(env: np.ndarray, exponents: Sequence[float], samples: int = 64, seed
             if grid is None:
                 maps[k][inside] = v
             else:
-                cubic_lookup_into(maps[k].reshape(n * n, 3), texels, np.ascontiguousarray(v.T, dtype=np.float32), *grid,
-                                  *grid_coordinates(n, *grid), np.ones(len(texels)))
+                values = rgba_grid(*grid)
+                values.reshape(-1, 4)[:, :3] = v
+                cubic_lookup_into(maps[k].reshape(n * n, 3), texels, values.reshape(-1), *grid, *grid_coordinates(n, *grid),
+                                  np.ones(len(texels)))
     return maps
 
 

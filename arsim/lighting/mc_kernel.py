@@ -7,7 +7,8 @@ samples) temporaries. The NumPy path stays as its reference in the tests.
 
 What depends only on a sample's place in the pattern (its cos theta, its azimuth's cosine and sine, the
 part of its level of detail that its pdf sets) is tabulated once per exponent (mc.pattern_tables); per
-sample there remain a rotation, one atan2, one log2 and two bilinear reads of a float32 RGBA chain."""
+sample there remain a rotation, one atan2, one log2 and two bilinear reads of a float32 RGBA chain, each
+four vector reads (core.simd)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ import math
 
 import numba
 import numpy as np
+
+from arsim.core.simd import accumulate_texels
 
 
 # atan(a) = a * P(a^2) on [0, 1], least squares on Chebyshev nodes: 6e-9 rad at most (a 512² map's
@@ -59,20 +62,12 @@ def _level_texel(size, offset, s, t):  # pragma: no cover (compiled)
 
 @numba.njit(inline="always")
 def _bilinear_at(flat, at, stride, fr, fc):  # pragma: no cover (compiled)
-    """The bilinear RGB of texels at, at + 1, at + stride, at + stride + 1 (RGBA, flat index in texels)
-    with fractions fr (down a row) and fc (along it). The levels' copied border makes this clamp-to-edge,
-    scipy's map_coordinates (order 1, mode 'nearest') on the level itself."""
-    i00 = 4 * at
-    i10 = 4 * (at + stride)
-    one = np.float32(1.0)
-    w00 = (one - fr) * (one - fc)
-    w01 = (one - fr) * fc
-    w10 = fr * (one - fc)
-    w11 = fr * fc
-    r = w00 * flat[i00] + w01 * flat[i00 + 4] + w10 * flat[i10] + w11 * flat[i10 + 4]
-    g = w00 * flat[i00 + 1] + w01 * flat[i00 + 5] + w10 * flat[i10 + 1] + w11 * flat[i10 + 5]
-    b = w00 * flat[i00 + 2] + w01 * flat[i00 + 6] + w10 * flat[i10 + 2] + w11 * flat[i10 + 6]
-    return r, g, b
+    """The bilinear RGBA of texels at, at + 1, at + stride, at + stride + 1 (flat index in texels) with
+    fractions fr (down a row) and fc (along it): four vector reads (core.simd). The levels' copied border makes
+    this clamp-to-edge, scipy's map_coordinates (order 1, mode 'nearest') on the level itself."""
+    one, zero = np.float32(1.0), np.float32(0.0)
+    return accumulate_texels((zero, zero, zero, zero), flat, (at, at + 1, at + stride, at + stride + 1),
+                             ((one - fr) * (one - fc), (one - fr) * fc, fr * (one - fc), fr * fc))
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy", fastmath=True)
@@ -159,10 +154,10 @@ def mc_values(dirs, turns, cos_t, along_t, along_b, lod_base, flat, offsets, siz
                 ll[j] = frac
             acc_r = acc_g = acc_b = 0.0
             for j in range(samples):  # the reads: independent, so their latencies overlap
-                r, g, bl = _bilinear_at(flat, at_lo[j], stride_lo[j], fr_lo[j], fc_lo[j])
+                r, g, bl, _ = _bilinear_at(flat, at_lo[j], stride_lo[j], fr_lo[j], fc_lo[j])
                 frac = ll[j]
                 if frac > 0:
-                    r2, g2, b2 = _bilinear_at(flat, at_hi[j], stride_hi[j], fr_hi[j], fc_hi[j])
+                    r2, g2, b2, _ = _bilinear_at(flat, at_hi[j], stride_hi[j], fr_hi[j], fc_hi[j])
                     r += frac * (r2 - r)
                     g += frac * (g2 - g)
                     bl += frac * (b2 - bl)

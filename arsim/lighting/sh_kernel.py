@@ -17,6 +17,8 @@ import math
 import numba
 import numpy as np
 
+from arsim.core.simd import accumulate_texels
+
 RING_BLOCK = 128
 
 
@@ -206,21 +208,21 @@ def _catmull_rom(t):  # pragma: no cover (compiled)
 
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den):  # pragma: no cover (compiled)
-    """out[texel_index[k], c] = the Catmull-Rom (bicubic) value of the (C <= 3, n_theta * n_phi) grid at fractional
-    (rows[k], cols[k]), divided by den[k] (0 where den[k] <= 0). Rows past a pole continue on the far side
-    of it (row -r is row r half a turn round), columns wrap. Away from the poles and the seam a row's four
-    columns are contiguous and read without a modulo (1.8x faster; the same sums in the same order)."""
-    channels = grid.shape[0]
+    """out[texel_index[k], c] = the Catmull-Rom (bicubic) value of the grid at fractional (rows[k], cols[k]),
+    divided by den[k] (0 where den[k] <= 0), for the C = out.shape[1] <= 3 channels. The grid is RGBA float32,
+    flat (n_theta * n_phi * 4: rgba_grid), so that each of a row's four taps is one vector read and multiply-add
+    (core.simd). Rows past a pole continue on the far side of it (row -r is row r half a turn round), columns
+    wrap."""
+    channels = out.shape[1]
     half = n_phi // 2
-    # Three channels read (1 or 3 in use; a single channel is read thrice).
-    g0, g1, g2 = grid[0], grid[min(1, channels - 1)], grid[min(2, channels - 1)]
+    zero = np.float32(0.0)
     for k in numba.prange(rows.size):
         r0 = int(math.floor(rows[k]))
         c0 = int(math.floor(cols[k]))
         wr = _catmull_rom(rows[k] - r0)
         wc = _catmull_rom(cols[k] - c0)
         near_pole = r0 < 1 or r0 + 2 > n_theta - 1
-        a0 = a1 = a2 = 0.0
+        acc = (zero, zero, zero, zero)
         for i in range(4):
             r = r0 - 1 + i
             shift = 0
@@ -233,28 +235,27 @@ def cubic_lookup_into(out, texel_index, grid, n_theta, n_phi, rows, cols, den): 
                     shift = half
             base = r * n_phi
             first = c0 - 1 + shift
-            if first >= 0 and first + 3 < n_phi:
+            w = wr[i]
+            weights = (np.float32(w * wc[0]), np.float32(w * wc[1]), np.float32(w * wc[2]), np.float32(w * wc[3]))
+            if first >= 0 and first + 3 < n_phi:  # (away from the poles and the seam: no modulo)
                 q = base + first
-                b0 = wc[0] * g0[q] + wc[1] * g0[q + 1] + wc[2] * g0[q + 2] + wc[3] * g0[q + 3]
-                b1 = wc[0] * g1[q] + wc[1] * g1[q + 1] + wc[2] * g1[q + 2] + wc[3] * g1[q + 3]
-                b2 = wc[0] * g2[q] + wc[1] * g2[q + 1] + wc[2] * g2[q + 2] + wc[3] * g2[q + 3]
+                acc = accumulate_texels(acc, grid, (q, q + 1, q + 2, q + 3), weights)
             else:
-                b0 = b1 = b2 = 0.0
-                for j in range(4):
-                    q = base + (first + j) % n_phi
-                    b0 += wc[j] * g0[q]
-                    b1 += wc[j] * g1[q]
-                    b2 += wc[j] * g2[q]
-            a0 += wr[i] * b0
-            a1 += wr[i] * b1
-            a2 += wr[i] * b2
+                acc = accumulate_texels(acc, grid, (base + first % n_phi, base + (first + 1) % n_phi,
+                                                    base + (first + 2) % n_phi, base + (first + 3) % n_phi), weights)
         inverse = 1.0 / den[k] if den[k] > 0 else 0.0
         t = texel_index[k]
-        out[t, 0] = a0 * inverse
+        out[t, 0] = acc[0] * inverse
         if channels > 1:
-            out[t, 1] = a1 * inverse
+            out[t, 1] = acc[1] * inverse
         if channels > 2:
-            out[t, 2] = a2 * inverse
+            out[t, 2] = acc[2] * inverse
+
+
+def rgba_grid(n_theta: int, n_phi: int) -> np.ndarray:
+    """A zeroed (n_theta, n_phi, 4) float32 grid for cubic_lookup_into (channels written through its [..., c]
+    views; the fourth lane pads each point to one vector)."""
+    return np.zeros((n_theta, n_phi, 4), dtype=np.float32)
 
 
 @numba.njit(parallel=True, cache=True, fastmath=True)

@@ -35,7 +35,7 @@ from arsim.core.conventions import (anglemap_directions, anglemap_disk_mask, ang
                                     direction_to_equirect_uv, equirect_directions, equirect_solid_angles)
 from arsim.core.resample import detect_layout
 from arsim.lighting.phong import phong_zonal_coefficients
-from arsim.lighting.sh_kernel import cubic_lookup_into
+from arsim.lighting.sh_kernel import cubic_lookup_into, rgba_grid
 
 _SHT = ducc0.sht.experimental
 EPSILON = 1e-12  # the NUFFTs' relative accuracy for `sh` (its coefficients must match the exact texel sums)
@@ -366,8 +366,10 @@ def _lobe_lookup(alm: np.ndarray, lmax: int, exponent: float, bands: int, coordi
     l, m, _ = _alm_index(lmax)
     keep = (l < bands) & (m < bands)
     size = grid_size(exponent, bands)
-    grid = synthesise_cc_grid(zonal_scale(alm[:, keep], phong_zonal_coefficients(exponent, bands)), bands - 1, *size)
-    cubic_lookup_into(out, index, grid.reshape(grid.shape[0], -1), *size, *coordinates(*size), den)
+    grid = rgba_grid(*size)  # (each channel synthesised straight into its lane)
+    scaled = zonal_scale(alm[:, keep], phong_zonal_coefficients(exponent, bands)).astype(np.complex64, copy=False)
+    synthesise_cc_grid(scaled, bands - 1, *size, out=np.moveaxis(grid, 2, 0)[:len(scaled)])
+    cubic_lookup_into(out, index, grid.reshape(-1), *size, *coordinates(*size), den)
 
 
 @functools.lru_cache(maxsize=64)
@@ -384,9 +386,11 @@ def _equirect_weight_map(h: int, n: int, exponent: float, bands: int) -> np.ndar
     columns = _SHT.synthesis_2d(alm=alm * phong_zonal_coefficients(exponent, bands), spin=0, lmax=bands - 1, mmax=0,
                                 geometry="CC", ntheta=n_theta, nphi=4, nthreads=threads())
     rows, _ = _equirect_frame_coordinates(n, n_theta, 4)
-    values = np.zeros((rows.size, 3), dtype=np.float32)
-    cubic_lookup_into(values, np.arange(rows.size), columns.reshape(1, -1).astype(np.float32), n_theta, 4, rows,
-                      np.ones(rows.size), np.ones(rows.size))
+    values = np.zeros((rows.size, 1), dtype=np.float32)
+    grid = rgba_grid(n_theta, 4)
+    grid[..., 0] = columns[0]
+    cubic_lookup_into(values, np.arange(rows.size), grid.reshape(-1), n_theta, 4, rows, np.ones(rows.size),
+                      np.ones(rows.size))
     values = values[:, 0].astype(np.float64)
     values.setflags(write=False)
     return values
