@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from llvmlite import ir
 from numba import types
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 RGBA = types.UniTuple(types.float32, 4)
-_FAST = ("fast",)
 
 
 def _splat(builder, value, vector):
@@ -39,11 +39,13 @@ def accumulate_texels(typingctx, acc, flat, index, weights):
         total = ir.Constant(vector, ir.Undefined)
         for lane in range(4):
             total = builder.insert_element(total, builder.extract_value(acc_value, lane), ir.Constant(ir.IntType(32), lane))
+        # (the fused multiply-add spelled out: one rounding wherever the code is compiled; a multiply and an add
+        # that the compiler was free to fuse gave other last bits in a fresh compile than in numba's cached one)
+        fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vector, [vector] * 3), "llvm.fma.v4f32")
         for k in range(4):
             at = builder.mul(builder.sext(builder.extract_value(index_value, k), ir.IntType(64)), ir.Constant(ir.IntType(64), 4))
             texel = builder.load(builder.bitcast(builder.gep(data, [at]), vector.as_pointer()), align=4)
-            weighted = builder.fmul(texel, _splat(builder, builder.extract_value(weight_value, k), vector), flags=_FAST)
-            total = builder.fadd(total, weighted, flags=_FAST)
+            total = builder.call(fma, [texel, _splat(builder, builder.extract_value(weight_value, k), vector), total])
         lanes = [builder.extract_element(total, ir.Constant(ir.IntType(32), lane)) for lane in range(4)]
         return context.make_tuple(builder, signature.return_type, lanes)
 
