@@ -53,7 +53,7 @@ np.save(sys.argv[1], np.concatenate([mc_maps(env, [1, 10, 40], 16, seed=2), sht_
     environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     for name in ("fresh", "cached"):
         done = subprocess.run([sys.executable, "-c", script, str(tmp_path / f"{name}.npy")], env=environment,
-                              capture_output=True, text=True)
+                              capture_output=True, text=True, check=False)
         assert done.returncode == 0, done.stderr
     assert any((tmp_path / "cache").rglob("*.nbc"))  # (the second process had a cache to load)
     assert np.array_equal(np.load(tmp_path / "fresh.npy"), np.load(tmp_path / "cached.npy"))
