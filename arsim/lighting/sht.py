@@ -137,7 +137,8 @@ def adjoint_at(planes: np.ndarray, loc: np.ndarray, lmax: int, epsilon: float) -
                 for c, a, b in pieces]
 
     runs = work_runs(len(planes), points, os.cpu_count() or 1)
-    results = [result for pieces in _thread_pool().map(run, runs) for result in pieces]
+    with ThreadPoolExecutor(len(runs)) as pool:  # (joined here: no threads outlive the call)
+        results = [result for pieces in pool.map(run, runs) for result in pieces]
     out = np.zeros((len(planes), results[0].size), dtype=results[0].dtype)
     for (c, _, _), result in zip((piece for pieces in runs for piece in pieces), results):
         out[c] += result  # (a plane's pieces in the order of its points)
@@ -159,18 +160,6 @@ def work_runs(planes: int, points: int, workers: int) -> list[list[tuple[int, in
             a += end - start
         runs.append(pieces)
     return runs
-
-
-_POOL: tuple[int, ThreadPoolExecutor] | None = None
-
-
-def _thread_pool() -> ThreadPoolExecutor:
-    """A thread per core, kept for the process (starting and joining them cost 2-3 ms a bake); a forked child,
-    whose copy of the pool has no threads, makes its own."""
-    global _POOL
-    if _POOL is None or _POOL[0] != os.getpid():
-        _POOL = (os.getpid(), ThreadPoolExecutor(os.cpu_count() or 1, thread_name_prefix="arsim-sht"))
-    return _POOL[1]
 
 
 def texel_sums(env: np.ndarray, order: int) -> np.ndarray:
