@@ -26,8 +26,7 @@ def accumulate_texels(typingctx, acc, flat, index, weights):
     """acc + sum_k weights[k] * texel(index[k]), lane by lane: acc and weights 4-tuples of float32, flat a 1-D
     float32 array of RGBA texels (texel i is flat[4 i : 4 i + 4]), index a 4-tuple of texel indices (not
     checked against the array's bounds)."""
-    quad = types.UniTuple(types.float32, 4)
-    if (acc != quad or weights != quad or not isinstance(flat, types.Array) or flat.dtype != types.float32
+    if (acc != RGBA or weights != RGBA or not isinstance(flat, types.Array) or flat.dtype != types.float32
             or flat.ndim != 1 or not isinstance(index, types.UniTuple) or len(index) != 4
             or not isinstance(index.dtype, types.Integer)):
         return None
@@ -49,4 +48,4 @@ def accumulate_texels(typingctx, acc, flat, index, weights):
         lanes = [builder.extract_element(total, ir.Constant(ir.IntType(32), lane)) for lane in range(4)]
         return context.make_tuple(builder, signature.return_type, lanes)
 
-    return quad(acc, flat, index, weights), codegen
+    return RGBA(acc, flat, index, weights), codegen
